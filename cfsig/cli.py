@@ -1,0 +1,358 @@
+"""The command line: parses options, calls the library, prints. Run ``cfsig --help``."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import fields
+from pathlib import Path
+
+import click
+import numpy as np
+
+from . import __version__
+from .batch import compute_many
+from .conformal import SOLVERS
+from .errors import CfsigError
+from .evaluate import evaluate_distances, labels_from_cla, read_cla
+from .index import Entry, IndexReader, IndexWriter
+from .mesh import find_meshes
+from .params import Params
+from .search import l1_distances, search
+from .signature import signature_file
+
+EXIT_ERROR = 1
+EXIT_SKIPPED = 3
+_COMMIT_EVERY = (200, 30.0)  # records, seconds
+
+_params_options = [
+    click.option("--normalize/--no-normalize", default=None,
+                 help="Normalise phi to [0, 1] before the histogram (paper section 3.1)."),
+    click.option("--seed", type=int, default=None, help="Seed of the surface sampling [0]."),
+    click.option("--bins", type=int, default=None, help="Histogram bins [200]."),
+]  # fmt: skip
+_solver_option = click.option(
+    "--solver", type=click.Choice(SOLVERS), default="auto", show_default=True,
+    help="Sparse solver: CHOLMOD when installed (auto), or SciPy's SuperLU.",
+)  # fmt: skip
+_jobs_option = click.option(
+    "--jobs", "-j", type=click.IntRange(min=1), default=None,
+    help="Worker processes [all cores].",
+)  # fmt: skip
+_json_option = click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+
+
+def _with(options: list[Callable]) -> Callable:
+    """Apply several click options to a command."""
+
+    def decorate(func: Callable) -> Callable:
+        for option in reversed(options):
+            func = option(func)
+        return func
+
+    return decorate
+
+
+def _params(base: Params | None = None, **given: object) -> Params:
+    """Parameters from the options that were given, on top of ``base`` or the defaults."""
+    values = {f.name: getattr(base or Params(), f.name) for f in fields(Params)}
+    values.update({k: v for k, v in given.items() if v is not None})
+    try:
+        return Params(**values)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc)) from None
+
+
+def _fail(message: str, code: int = EXIT_ERROR) -> None:
+    """Print one error line and exit."""
+    click.echo(f"Error: {message}", err=True)
+    sys.exit(code)
+
+
+def _report_skipped(skipped: list[str], strict: bool) -> None:
+    """List the files that failed and exit with the right status."""
+    if not skipped:
+        return
+    click.echo(f"Skipped {len(skipped)} file(s):", err=True)
+    for line in skipped:
+        click.echo(f"  {line}", err=True)
+    sys.exit(EXIT_ERROR if strict else EXIT_SKIPPED)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="cfsig")
+def main() -> None:
+    """Pose-invariant 3D shape retrieval with conformal-factor signatures.
+
+    \b
+    Exit status: 0 success; 1 an error (bad input, unusable index, --strict failure);
+    2 bad usage; 3 finished, but some mesh files were skipped (listed at the end).
+    """
+
+
+@main.command()
+@click.argument("meshes", nargs=-1, required=True, type=click.Path(path_type=Path))
+@_with(_params_options)
+@_solver_option
+@_json_option
+@click.option("--save", type=click.Path(file_okay=False, path_type=Path),
+              help="Write DIR/<name>.npz with the signature and per-vertex phi.")  # fmt: skip
+def compute(meshes, normalize, seed, bins, solver, as_json, save) -> None:
+    """Compute the conformal factor and signature of each mesh.
+
+    \b
+    Example:
+      cfsig compute human/1.off hand/181.off
+      cfsig compute --json --save out/ spring/261.off
+    """
+    params = _params(normalize=normalize, seed=seed, bins=bins)
+    rows, failed = [], []
+    for path in meshes:
+        try:
+            sig = signature_file(path, params, solver)
+        except CfsigError as exc:
+            failed.append(str(exc))
+            rows.append({"file": str(path), "error": str(exc)})
+            continue
+        for repair in sig.repairs:
+            click.echo(f"Warning: {path}: {repair}", err=True)
+        row = _describe(path, sig)
+        rows.append(row)
+        if save:
+            save.mkdir(parents=True, exist_ok=True)
+            np.savez(save / f"{path.stem}.npz", signature=sig.histogram, phi=sig.phi,
+                     params=params.to_json())  # fmt: skip
+        if not as_json:
+            click.echo(
+                f"{path}: {row['vertices']} vertices, {row['faces']} faces, "
+                f"{row['components']} component(s), phi in [{row['phi_min']:.3f}, "
+                f"{row['phi_max']:.3f}], curvature error {row['curvature_error']:.2e} pi, "
+                f"{row['seconds']:.3f} s"
+            )
+    if as_json:
+        click.echo(json.dumps(rows, indent=2))
+    _report_errors(failed)
+
+
+def _describe(path: Path, sig) -> dict:
+    """The facts `compute` reports about one signature."""
+    low, high = sig.phi_range
+    return {
+        "file": str(path), "vertices": sig.n_vertices, "faces": sig.n_faces,
+        "components": sig.n_components, "phi_min": low, "phi_max": high,
+        "curvature_error": sig.curvature_error, "seconds": sig.seconds,
+        "repairs": list(sig.repairs),
+    }  # fmt: skip
+
+
+def _report_errors(errors: list[str]) -> None:
+    """Print failures of single-file commands and exit with status 1 if there were any."""
+    for line in errors:
+        click.echo(f"Error: {line}", err=True)
+    if errors:
+        sys.exit(EXIT_ERROR)
+
+
+@main.command()
+@click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="The index file (HDF5); created, or updated with new and changed meshes.",
+)
+@_with(_params_options)
+@_solver_option
+@_jobs_option
+@click.option("--strict", is_flag=True, help="Stop at the first file that fails.")
+def index(paths, output, normalize, seed, bins, solver, jobs, strict) -> None:  # fmt: skip
+    """Index mesh files and folders (recursively: OFF, OBJ, PLY, STL) into an HDF5 file.
+
+    Each mesh is stored under its path relative to the folder given, labelled with the name of
+    the folder that holds it. Running the command again adds new and changed files only.
+    Files that fail are skipped and listed at the end (exit status 3).
+
+    \b
+    Example:
+      cfsig index shrec07/ -o shrec07.h5 --jobs 2
+    """
+    try:
+        base = IndexReader(output).params if output.exists() else None
+    except CfsigError as exc:
+        _fail(str(exc))
+    params = _params(base, normalize=normalize, seed=seed, bins=bins)
+    try:
+        with IndexWriter(output, params) as writer:
+            skipped = _index_into(writer, paths, solver, jobs, strict)
+    except CfsigError as exc:
+        _fail(str(exc))
+    click.echo(f"{output}: {len(writer.known)} meshes indexed")
+    _report_skipped(skipped, strict)
+
+
+def _index_into(writer: IndexWriter, paths, solver: str, jobs, strict: bool) -> list[str]:
+    """Compute and commit the new and changed meshes; return the failures."""
+    todo, names = [], {}
+    for path, name in find_meshes(paths):
+        names[path] = name
+        if writer.is_current(name, path):
+            continue
+        todo.append(path)
+    skipped, last_commit = [], time.monotonic()
+    outcomes = compute_many(todo, writer.params, solver, jobs)
+    for outcome in _progress(outcomes, len(todo), "indexing"):
+        if outcome.error:
+            skipped.append(outcome.error)
+            if strict:
+                break
+            continue
+        path = outcome.path
+        writer.add(Entry(names[path], path.parent.name, str(path.resolve())), outcome.signature)
+        if writer.pending >= _COMMIT_EVERY[0] or time.monotonic() - last_commit > _COMMIT_EVERY[1]:
+            writer.commit()
+            last_commit = time.monotonic()
+    return skipped
+
+
+def _progress(iterable, total: int, what: str):
+    """A tqdm progress bar on standard error."""
+    from tqdm import tqdm
+
+    return tqdm(iterable, total=total, desc=what, unit="mesh", file=sys.stderr, leave=False)
+
+
+@main.command()
+@click.argument("index_file", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("meshes", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("-k", type=click.IntRange(min=1), default=20, show_default=True,
+              help="Number of results per query.")  # fmt: skip
+@_solver_option
+@_json_option
+def query(index_file, meshes, k, solver, as_json) -> None:
+    """Find the k indexed meshes nearest to each query mesh (L1 distance).
+
+    The query signatures are computed with the index's own parameters.
+
+    \b
+    Example:
+      cfsig query shrec07.h5 shrec07/ant/81.off -k 10
+    """
+    try:
+        with IndexReader(index_file) as reader:
+            sigs = [signature_file(path, reader.params, solver).histogram for path in meshes]
+            results = search(reader, np.array(sigs), k)
+    except CfsigError as exc:
+        _fail(str(exc))
+    if as_json:
+        lists = [
+            [
+                {
+                    "rank": h.rank,
+                    "distance": h.distance,
+                    "name": h.entry.name,
+                    "label": h.entry.label,
+                }
+                for h in hits
+            ]  # fmt: skip
+            for hits in results
+        ]
+        click.echo(json.dumps(lists[0] if len(lists) == 1 else lists, indent=2))
+        return
+    for path, hits in zip(meshes, results, strict=True):
+        click.echo(f"# {path}")
+        for h in hits:
+            click.echo(f"{h.rank:4d}  {h.distance:.4f}  {h.entry.name}  {h.entry.label}")
+
+
+@main.command()
+@click.argument("folder", required=False, type=click.Path(file_okay=False, path_type=Path))
+@click.option(
+    "--classes",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Classes from a Princeton Shape Benchmark .cla file instead of subfolders.",
+)
+@click.option(
+    "--index",
+    "index_file",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Evaluate the signatures of an index instead of computing them.",
+)
+@_with(_params_options)
+@_solver_option
+@_jobs_option
+@click.option("--strict", is_flag=True, help="Stop at the first file that fails.")
+@_json_option
+def evaluate(folder, classes, index_file, normalize, seed, bins, solver, jobs, strict,
+             as_json) -> None:  # fmt: skip
+    """Retrieval measures of a labelled collection (leave-one-out).
+
+    Each subfolder of FOLDER is a class (or --classes maps file ids to classes). Prints the
+    Princeton Shape Benchmark / SHREC measures NN, FT, ST, E, DCG and mAP, overall and per
+    class, and the precision/recall curve.
+
+    \b
+    Example:
+      cfsig evaluate shrec07/
+      cfsig evaluate shrec07/ --classes shrec07.cla --json
+      cfsig evaluate --index shrec07.h5
+    """
+    if (folder is None) == (index_file is None):
+        raise click.UsageError("give a FOLDER or --index, not both")
+    try:
+        cla = read_cla(classes) if classes else None
+    except (OSError, ValueError) as exc:
+        _fail(f"{classes}: {exc}")
+    skipped: list[str] = []
+    try:
+        if index_file:
+            with IndexReader(index_file) as reader:
+                names, labels = reader.column("names"), list(reader.column("labels"))
+                hists = reader.signatures[:]
+        else:
+            params = _params(normalize=normalize, seed=seed, bins=bins)
+            names, hists = _compute_folder(folder, params, solver, jobs, strict, skipped)
+            labels = [Path(name).parent.name or folder.name for name in names]
+    except CfsigError as exc:
+        _fail(str(exc))
+    if cla is not None:
+        labels = labels_from_cla(names, cla)
+    keep = [i for i, label in enumerate(labels) if label]
+    try:
+        report = evaluate_distances(
+            l1_distances(hists[keep], hists[keep]), [labels[i] for i in keep]
+        )
+    except ValueError as exc:
+        _fail(str(exc))
+    click.echo(json.dumps(report.to_dict(), indent=2) if as_json else _format_report(report))
+    _report_skipped(skipped, strict)
+
+
+def _compute_folder(folder: Path, params: Params, solver, jobs, strict, skipped: list[str]):
+    """Signatures of all meshes in a folder, in file order; failures go to ``skipped``."""
+    found = dict(find_meshes([folder]))
+    hists = {}
+    for outcome in _progress(compute_many(found, params, solver, jobs), len(found), "computing"):
+        if outcome.error:
+            skipped.append(outcome.error)
+            if strict:
+                break
+        else:
+            hists[outcome.path] = outcome.signature.histogram
+    order = [path for path in found if path in hists]
+    if not order:
+        _report_skipped(skipped, strict)
+        _fail(f"{folder}: no mesh files")
+    return [found[p] for p in order], np.array([hists[p] for p in order])
+
+
+def _format_report(report) -> str:
+    """The measures as text tables."""
+    keys = list(report.measures)
+    lines = [f"{report.count} queries", f"{'class':<16}" + "".join(f"{k:>8}" for k in keys)]
+    rows = [("ALL", report.measures), *sorted(report.per_class.items())]
+    lines += [f"{name:<16}" + "".join(f"{m[k]:8.3f}" for k in keys) for name, m in rows]
+    curve = "  ".join(f"{r:.2f}:{p:.3f}" for r, p in report.precision_recall)
+    return "\n".join([*lines, "precision at recall:", curve])

@@ -1,0 +1,213 @@
+"""The solve: the conformal factor phi of paper section 2.2, L phi = K^T - K^orig (eq. 1)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from . import geometry
+from .errors import MissingDependencyError, SolverError
+from .mesh import Mesh
+
+SOLVERS = ("auto", "scipy", "cholmod")
+
+
+@dataclass(frozen=True)
+class ConformalFactor:
+    """The conformal factor of a mesh and what was computed on the way.
+
+    Attributes
+    ----------
+    phi : (n,) float64
+        Conformal factor per vertex (dimensionless, log of the length scale), zero mean on every
+        connected component.
+    curvature : (n,) float64
+        Angle defects K^orig, radians.
+    target : (n,) float64
+        Target curvature K^T, radians.
+    face_areas : (m,) float64
+        Triangle areas of the (mollified) metric.
+    n_components : int
+        Number of connected components.
+    mollified : float
+        Length added to every edge by the intrinsic mollification (0 if none was needed).
+    curvature_error : float
+        ``||K^T - K^R|| / |V| / pi``, paper section 3.4.
+    """
+
+    phi: np.ndarray
+    curvature: np.ndarray
+    target: np.ndarray
+    face_areas: np.ndarray
+    n_components: int
+    mollified: float
+    curvature_error: float
+
+
+def conformal_factor(mesh: Mesh, mollify: float = 1e-5, solver: str = "auto") -> ConformalFactor:
+    """Compute the discrete conformal factor of a mesh (paper section 2.2).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        A checked triangle mesh with n vertices and m faces.
+    mollify : float
+        Intrinsic mollification margin relative to the mean edge length (see
+        `geometry.mollify`); it changes nothing on meshes without near-degenerate triangles.
+    solver : {"auto", "scipy", "cholmod"}
+        Sparse solver backend, see `solve_laplacian`.
+
+    Returns
+    -------
+    result : ConformalFactor
+
+    Raises
+    ------
+    SolverError
+        The system could not be solved to a finite solution.
+    MissingDependencyError
+        ``solver="cholmod"`` without a CHOLMOD binding installed.
+    """
+    n, faces = len(mesh.vertices), mesh.faces
+    lengths, delta = geometry.mollify(geometry.edge_lengths(mesh.vertices, faces), mollify)
+    boundary = geometry.boundary_vertices(faces, n)
+    curvature = geometry.angle_defect(geometry.corner_angles(lengths), faces, boundary)
+    areas = geometry.face_areas(lengths)
+    count, labels = geometry.components(faces, n)
+    target = geometry.target_curvature(curvature, geometry.vertex_areas(areas, faces, n), labels)
+    laplacian = geometry.cotan_laplacian(lengths, faces, n)
+    phi = solve_laplacian(laplacian, target - curvature, labels, solver)
+    error = curvature_error(lengths, faces, boundary, phi, target)
+    return ConformalFactor(phi, curvature, target, areas, count, delta, error)
+
+
+def curvature_error(
+    lengths: np.ndarray,
+    faces: np.ndarray,
+    boundary: np.ndarray,
+    phi: np.ndarray,
+    target: np.ndarray,
+) -> float:
+    """The curvature error of paper section 3.4.
+
+    Scales every edge ij by ``exp(-(phi_i + phi_j) / 2)``, the metric scaling of [BGB08] whose
+    linearisation is eq. (1) with our sign of L (phi > 0 on extrusions shrinks them), recomputes
+    the angle defects K^R and returns ``||K^T - K^R||_2 / |V|`` in units of pi.
+
+    Parameters
+    ----------
+    lengths : (m, 3) float64
+        Edge lengths, opposite each corner.
+    faces : (m, 3) int64
+        Triangles.
+    boundary : (n,) bool
+        Boundary vertices.
+    phi : (n,) float64
+        Conformal factor.
+    target : (n,) float64
+        Target curvature K^T in radians.
+
+    Returns
+    -------
+    error : float
+        Dimensionless, in units of pi.
+    """
+    edge_phi = phi[faces][:, [1, 2, 0]] + phi[faces][:, [2, 0, 1]]
+    scaled = lengths * np.exp(-edge_phi / 2)
+    reached = geometry.angle_defect(geometry.corner_angles(scaled), faces, boundary)
+    return float(np.linalg.norm(target - reached) / len(phi) / np.pi)
+
+
+def solve_laplacian(
+    laplacian: sp.spmatrix, rhs: np.ndarray, labels: np.ndarray, solver: str = "auto"
+) -> np.ndarray:
+    """Solve ``L x = rhs`` for a cotangent Laplacian, zero mean per connected component.
+
+    L has one null vector per component (the constants), so one vertex per component is pinned
+    to 0, the remaining symmetric positive definite system ``-L' x' = -rhs'`` is factorised, and
+    each component's mean is subtracted afterwards (the paper's zero-mean condition). ``rhs``
+    must sum to zero on every component; the pinned equation is then implied by the others.
+
+    Parameters
+    ----------
+    laplacian : (n, n) sparse float64
+        Symmetric negative semidefinite Laplacian whose null space is the per-component constants.
+    rhs : (n,) float64
+        Right-hand side, summing to zero per component.
+    labels : (n,) int
+        Connected component of each vertex.
+    solver : {"auto", "scipy", "cholmod"}
+        ``"cholmod"``: CHOLMOD's sparse Cholesky (needs the ``cholmod`` extra); ``"scipy"``:
+        SciPy's SuperLU with a symmetric minimum-degree ordering; ``"auto"``: CHOLMOD when
+        installed, else SciPy.
+
+    Returns
+    -------
+    x : (n,) float64
+        The solution with zero mean on every component.
+
+    Raises
+    ------
+    SolverError
+        Non-finite input, a failed factorisation or a non-finite solution.
+    ValueError
+        Unknown solver name.
+    MissingDependencyError
+        ``solver="cholmod"`` and no CHOLMOD binding installed.
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r}; choose from {', '.join(SOLVERS)}")
+    if not np.all(np.isfinite(rhs)) or not np.all(np.isfinite(laplacian.data)):
+        raise SolverError("the Laplacian or curvature is not finite (degenerate triangles?)")
+    n = len(rhs)
+    _, pinned = np.unique(labels, return_index=True)
+    keep = np.ones(n, dtype=bool)
+    keep[pinned] = False
+    system = (-laplacian[keep][:, keep]).tocsc()
+    x = np.zeros(n)
+    if system.shape[0]:
+        try:
+            x[keep] = _factorize(system, solver)(-rhs[keep])
+        except (RuntimeError, ValueError, ArithmeticError) as exc:
+            raise SolverError(f"sparse solve failed: {exc}") from None
+    if not np.all(np.isfinite(x)):
+        raise SolverError("the sparse solve returned a non-finite solution")
+    x -= (np.bincount(labels, weights=x) / np.bincount(labels))[labels]
+    return x
+
+
+def available_solvers() -> tuple[str, ...]:
+    """Names of the solver backends usable here, fastest first.
+
+    Returns
+    -------
+    names : tuple of str
+        A subset of ``("cholmod", "scipy")``.
+    """
+    return ("cholmod", "scipy") if _cholmod() is not None else ("scipy",)
+
+
+def _factorize(matrix: sp.csc_matrix, solver: str) -> Callable[[np.ndarray], np.ndarray]:
+    """Factorise a symmetric positive definite matrix with the chosen backend."""
+    cholesky = _cholmod()
+    if solver == "cholmod" and cholesky is None:
+        raise MissingDependencyError(
+            "solver 'cholmod' needs a CHOLMOD binding: pip install 'cfsig[cholmod]'"
+        )
+    if solver != "scipy" and cholesky is not None:
+        return cholesky(matrix).solve_A
+    lu = spla.splu(matrix, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
+    return lu.solve
+
+
+def _cholmod() -> Callable | None:
+    """The CHOLMOD factorisation class of sksparse-minimal, or None when not installed."""
+    try:
+        from sksparse_minimal import SparseCholesky
+    except ImportError:
+        return None
+    return SparseCholesky

@@ -1,0 +1,21 @@
+"""Typed exceptions raised by the library; the CLI turns them into one-line messages."""
+
+
+class CfsigError(Exception):
+    """Base class of every error cfsig raises on purpose."""
+
+
+class MeshError(CfsigError):
+    """A mesh file cannot be read, or its contents cannot give a signature."""
+
+
+class SolverError(CfsigError):
+    """The linear system for the conformal factor could not be solved."""
+
+
+class IndexFileError(CfsigError):
+    """An index file is missing, corrupt, foreign, busy or incompatible."""
+
+
+class MissingDependencyError(CfsigError):
+    """An optional dependency needed for the requested feature is not installed."""

@@ -1,0 +1,270 @@
+"""Curvature and the Laplacian: the discrete operators of paper section 2.2.
+
+Everything here is intrinsic: it is computed from the edge lengths of each triangle, so the same
+functions serve the original mesh, a mollified mesh and the conformally scaled metric of the
+curvature error (paper section 3.4). Edge ``j`` of a face is the edge opposite its corner ``j``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+_OPPOSITE = ((1, 2), (2, 0), (0, 1))
+
+
+def edge_lengths(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Length of each triangle's three edges.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        Vertex positions.
+    faces : (m, 3) int64
+        Triangles as indices into ``vertices``.
+
+    Returns
+    -------
+    lengths : (m, 3) float64
+        ``lengths[f, j]`` is the length of the edge of face ``f`` opposite its corner ``j``,
+        in the units of ``vertices``.
+    """
+    corners = vertices[faces]
+    return np.stack(
+        [np.linalg.norm(corners[:, b] - corners[:, a], axis=1) for a, b in _OPPOSITE], axis=1
+    )
+
+
+def mollify(lengths: np.ndarray, factor: float) -> tuple[np.ndarray, float]:
+    """Intrinsic mollification of Sharp and Crane (2020, section 4.5).
+
+    Adds the smallest constant to every edge length such that each triangle satisfies the triangle
+    inequality with a margin of ``factor`` times the mean edge length, so that zero-area and needle
+    triangles get finite angles and cotangents. Meshes that need nothing are returned unchanged.
+
+    Parameters
+    ----------
+    lengths : (m, 3) float64
+        Edge lengths as returned by `edge_lengths`.
+    factor : float
+        Margin relative to the mean edge length; 0 returns ``lengths`` unchanged.
+
+    Returns
+    -------
+    lengths : (m, 3) float64
+        The mollified edge lengths.
+    delta : float
+        The constant added to every length (0 when none was needed), in length units.
+    """
+    if factor <= 0 or len(lengths) == 0:
+        return lengths, 0.0
+    eps = factor * float(lengths.mean())
+    slack = lengths.sum(axis=1, keepdims=True) - 2 * lengths
+    delta = max(0.0, float((eps - slack).max()))
+    return (lengths + delta, delta) if delta > 0 else (lengths, 0.0)
+
+
+def corner_angles(lengths: np.ndarray) -> np.ndarray:
+    """Interior angle at each corner, by the law of cosines.
+
+    Parameters
+    ----------
+    lengths : (m, 3) float64
+        Edge lengths, ``lengths[f, j]`` opposite corner ``j``.
+
+    Returns
+    -------
+    angles : (m, 3) float64
+        Angles in radians, in [0, pi]; a metric that violates the triangle inequality gives
+        clipped angles of 0 or pi rather than NaN.
+    """
+    a, b, c = lengths.T
+    a2, b2, c2 = a * a, b * b, c * c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos = np.stack([(b2 + c2 - a2) / (2 * b * c), (c2 + a2 - b2) / (2 * c * a),
+                        (a2 + b2 - c2) / (2 * a * b)], axis=1)  # fmt: skip
+    return np.arccos(np.clip(np.nan_to_num(cos, nan=1.0), -1.0, 1.0))
+
+
+def face_areas(lengths: np.ndarray) -> np.ndarray:
+    """Triangle areas by Heron's formula in its numerically stable form (Kahan).
+
+    Parameters
+    ----------
+    lengths : (m, 3) float64
+        Edge lengths.
+
+    Returns
+    -------
+    areas : (m,) float64
+        Areas in squared length units; 0 for triangles that violate the triangle inequality.
+    """
+    s = -np.sort(-lengths, axis=1)
+    a, b, c = s.T
+    prod = (a + (b + c)) * (c - (a - b)) * (c + (a - b)) * (a + (b - c))
+    return 0.25 * np.sqrt(np.maximum(prod, 0.0))
+
+
+def cotan_laplacian(lengths: np.ndarray, faces: np.ndarray, n_vertices: int) -> sp.csc_matrix:
+    """The cotangent Laplacian (paper eq. 1, [HPW06]) of an intrinsic metric.
+
+    Parameters
+    ----------
+    lengths : (m, 3) float64
+        Edge lengths of the non-degenerate triangles ``faces``.
+    faces : (m, 3) int64
+        Triangles.
+    n_vertices : int
+        Number of vertices n.
+
+    Returns
+    -------
+    L : (n, n) scipy.sparse.csc_matrix, float64
+        Symmetric, negative semidefinite, ``L[i, j] = (cot a + cot b) / 2`` for an edge ij and
+        rows summing to zero; the same sign convention as libigl's ``cotmatrix``. Dimensionless.
+    """
+    a2 = lengths * lengths
+    cot = (a2.sum(axis=1, keepdims=True) - 2 * a2) / (4 * face_areas(lengths))[:, None]
+    rows = np.concatenate([faces[:, b] for b, _ in _OPPOSITE])
+    cols = np.concatenate([faces[:, c] for _, c in _OPPOSITE])
+    w = 0.5 * cot.T.ravel()
+    off = sp.coo_matrix((w, (rows, cols)), shape=(n_vertices, n_vertices))
+    off = off + off.T
+    diag = sp.diags(-np.asarray(off.sum(axis=1)).ravel())
+    return (off + diag).tocsc()
+
+
+def edge_face_counts(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every undirected edge and the number of faces that contain it.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+        Triangles.
+    n_vertices : int
+        Number of vertices n.
+
+    Returns
+    -------
+    edges : (e, 2) int64
+        Unique edges ``(i, j)`` with ``i < j``.
+    counts : (e,) int64
+        Faces per edge: 1 on a boundary, 2 inside a manifold, more on a non-manifold edge.
+    """
+    half = np.concatenate([faces[:, [b, c]] for b, c in _OPPOSITE])
+    half.sort(axis=1)
+    keys, counts = np.unique(half[:, 0] * n_vertices + half[:, 1], return_counts=True)
+    return np.stack([keys // n_vertices, keys % n_vertices], axis=1), counts
+
+
+def boundary_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Mark the vertices that lie on a boundary edge (an edge of one face only).
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+        Triangles.
+    n_vertices : int
+        Number of vertices n.
+
+    Returns
+    -------
+    boundary : (n,) bool
+    """
+    edges, counts = edge_face_counts(faces, n_vertices)
+    mask = np.zeros(n_vertices, dtype=bool)
+    mask[edges[counts == 1].ravel()] = True
+    return mask
+
+
+def angle_defect(angles: np.ndarray, faces: np.ndarray, boundary: np.ndarray) -> np.ndarray:
+    """Discrete Gaussian curvature as the angle defect (paper section 2.2, [MDSB02]).
+
+    Parameters
+    ----------
+    angles : (m, 3) float64
+        Corner angles in radians.
+    faces : (m, 3) int64
+        Triangles.
+    boundary : (n,) bool
+        Boundary vertices, which get pi - sum of angles instead of 2 pi - sum.
+
+    Returns
+    -------
+    K : (n,) float64
+        Curvature in radians per vertex; sums to 2 pi chi (Gauss-Bonnet).
+    """
+    total = np.bincount(faces.ravel(), weights=angles.ravel(), minlength=len(boundary))
+    return np.where(boundary, np.pi, 2 * np.pi) - total
+
+
+def vertex_areas(areas: np.ndarray, faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """A third of the area of the faces around each vertex (the barycentric vertex area).
+
+    Parameters
+    ----------
+    areas : (m,) float64
+        Face areas.
+    faces : (m, 3) int64
+        Triangles.
+    n_vertices : int
+        Number of vertices n.
+
+    Returns
+    -------
+    vertex_area : (n,) float64
+        In squared length units; sums to the total area.
+    """
+    return np.bincount(faces.ravel(), weights=np.repeat(areas / 3, 3), minlength=n_vertices)
+
+
+def components(faces: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
+    """Connected components of the mesh's vertex graph.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+        Triangles.
+    n_vertices : int
+        Number of vertices n.
+
+    Returns
+    -------
+    count : int
+        Number of components.
+    labels : (n,) int32
+        Component of each vertex, numbered from 0.
+    """
+    rows = faces.ravel()
+    cols = np.roll(faces, 1, axis=1).ravel()
+    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_vertices, n_vertices))
+    count, labels = connected_components(graph, directed=False)
+    return int(count), labels
+
+
+def target_curvature(
+    curvature: np.ndarray, vertex_area: np.ndarray, labels: np.ndarray
+) -> np.ndarray:
+    """The uniform target curvature K^T of paper section 2.2, per connected component.
+
+    Each vertex gets its component's total curvature times its share of the component's area,
+    so that K^T - K sums to zero on every component, as the singular system needs.
+
+    Parameters
+    ----------
+    curvature : (n,) float64
+        Angle defects K^orig in radians.
+    vertex_area : (n,) float64
+        Barycentric vertex areas.
+    labels : (n,) int
+        Component of each vertex.
+
+    Returns
+    -------
+    K_target : (n,) float64
+        Target curvature in radians per vertex.
+    """
+    total_k = np.bincount(labels, weights=curvature)
+    total_a = np.bincount(labels, weights=vertex_area)
+    return total_k[labels] * vertex_area / total_a[labels]

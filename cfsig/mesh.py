@@ -1,0 +1,299 @@
+"""Reading and repairing triangle meshes: OFF, OBJ, PLY and STL files to checked numpy arrays."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import MeshError, MissingDependencyError
+
+MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """A checked triangle mesh.
+
+    Attributes
+    ----------
+    vertices : (n, 3) float64
+        Finite vertex positions, every one referenced by a face.
+    faces : (m, 3) int64
+        Triangles with three distinct in-range indices, no face repeated.
+    repairs : tuple of str
+        What was repaired on reading, in words (empty for a clean mesh).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    repairs: tuple[str, ...] = ()
+
+
+def read_mesh(path: str | os.PathLike) -> Mesh:
+    """Read a mesh file and check and repair it with `clean_mesh`.
+
+    OFF is parsed here; OBJ, PLY and STL through trimesh. Polygons are split into triangle fans.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A ``.off``, ``.obj``, ``.ply`` or ``.stl`` file.
+
+    Returns
+    -------
+    mesh : Mesh
+
+    Raises
+    ------
+    MeshError
+        The file is missing, unreadable, of an unknown type, malformed, or holds no usable
+        triangle; the message names the file and the reason.
+    """
+    return parse_mesh(read_bytes(path), path)
+
+
+def read_bytes(path: str | os.PathLike) -> bytes:
+    """Read a mesh file's bytes, checking its extension first.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A ``.off``, ``.obj``, ``.ply`` or ``.stl`` file.
+
+    Returns
+    -------
+    data : bytes
+
+    Raises
+    ------
+    MeshError
+        Unknown extension, or the file cannot be read.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        raise MeshError(f"{path}: unknown mesh type {suffix or '(no extension)'!r}")
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise MeshError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def parse_mesh(data: bytes, path: str | os.PathLike) -> Mesh:
+    """Parse a mesh file's bytes and check and repair it with `clean_mesh`.
+
+    Parameters
+    ----------
+    data : bytes
+        The file's contents.
+    path : str or path-like
+        The file's name: its extension selects the format and messages name it.
+
+    Returns
+    -------
+    mesh : Mesh
+
+    Raises
+    ------
+    MeshError
+        Malformed contents or no usable triangle; the message names the file and the reason.
+    """
+    suffix = Path(path).suffix.lower()
+    if not data.strip():
+        raise MeshError(f"{path}: empty file")
+    try:
+        vertices, faces = _parse_off(data) if suffix == ".off" else _parse_trimesh(data, suffix)
+    except MeshError as exc:
+        raise MeshError(f"{path}: {exc}") from None
+    try:
+        return clean_mesh(vertices, faces)
+    except MeshError as exc:
+        raise MeshError(f"{path}: {exc}") from None
+
+
+def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
+    """Check a triangle mesh and repair what can be repaired soundly.
+
+    Repairs: exactly coincident vertices are merged (STL files store triangle soups), faces that
+    repeat a vertex and repeated faces are dropped, unreferenced vertices are removed.
+
+    Parameters
+    ----------
+    vertices : (n, 3) array_like of float
+        Vertex positions.
+    faces : (m, 3) array_like of int
+        Triangles.
+
+    Returns
+    -------
+    mesh : Mesh
+
+    Raises
+    ------
+    MeshError
+        Non-finite coordinates, face indices out of range, or no triangle left.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces)
+    if vertices.ndim != 2 or vertices.shape[1] != 3:
+        raise MeshError(f"vertices must have shape (n, 3), not {vertices.shape}")
+    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+        raise MeshError("no triangles")
+    if not np.all(np.isfinite(vertices)):
+        bad = int(np.count_nonzero(~np.isfinite(vertices).all(axis=1)))
+        raise MeshError(f"{bad} vertices have NaN or infinite coordinates")
+    if not np.issubdtype(faces.dtype, np.integer):
+        raise MeshError("face indices are not integers")
+    faces = faces.astype(np.int64)
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise MeshError(
+            f"face index out of range: indices span [{faces.min()}, {faces.max()}] "
+            f"but there are {len(vertices)} vertices"
+        )
+    repairs: list[str] = []
+    unique, inverse = np.unique(vertices, axis=0, return_inverse=True)
+    if len(unique) < len(vertices):
+        repairs.append(f"merged {len(vertices) - len(unique)} coincident vertices")
+        vertices, faces = unique, inverse.reshape(-1)[faces]
+    repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2])
+    repeated |= faces[:, 2] == faces[:, 0]
+    if repeated.any():
+        repairs.append(f"dropped {int(repeated.sum())} faces that repeat a vertex")
+        faces = faces[~repeated]
+    _, first = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
+    if len(first) < len(faces):
+        repairs.append(f"dropped {len(faces) - len(first)} duplicate faces")
+        faces = faces[np.sort(first)]
+    if len(faces) == 0:
+        raise MeshError("no triangles left after dropping degenerate faces")
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces.ravel()] = True
+    if not used.all():
+        repairs.append(f"removed {int((~used).sum())} unreferenced vertices")
+        remap = np.cumsum(used) - 1
+        vertices, faces = vertices[used], remap[faces]
+    return Mesh(vertices, faces, tuple(repairs))
+
+
+def _parse_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """Parse OFF bytes (also COFF, NOFF and the like) into vertices and triangulated faces."""
+    if b"#" in data:
+        data = b"\n".join(line.split(b"#", 1)[0] for line in data.splitlines())
+    tokens = data.split()
+    if not tokens[0].upper().endswith(b"OFF"):
+        raise MeshError("not an OFF file (no OFF header)")
+    try:
+        n_v, n_f = int(tokens[1]), int(tokens[2])
+    except (IndexError, ValueError):
+        raise MeshError("malformed OFF header: expected vertex and face counts") from None
+    if n_v < 3 or n_f < 1:
+        raise MeshError(f"OFF header declares {n_v} vertices and {n_f} faces")
+    body = tokens[4:]
+    if len(body) < 3 * n_v + 4 * n_f:  # checked before allocating: a lying header costs nothing
+        raise MeshError(
+            f"truncated OFF: the header declares {n_v} vertices and {n_f} faces "
+            f"but the file holds only {len(body)} numbers"
+        )
+    try:
+        values = np.array(body[: 3 * n_v + 4 * n_f], dtype=np.float64)
+    except ValueError:
+        values = None
+    if values is not None and tokens[0].upper() == b"OFF":
+        tris = values[3 * n_v :].reshape(-1, 4)
+        if np.all(tris[:, 0] == 3):
+            return values[: 3 * n_v].reshape(-1, 3), _as_indices(tris[:, 1:])
+    return _parse_off_lines(data, n_v, n_f)
+
+
+def _parse_off_lines(data: bytes, n_v: int, n_f: int) -> tuple[np.ndarray, np.ndarray]:
+    """Line-by-line OFF parse for polygons, colours and per-vertex extras."""
+    lines = [line.split() for line in data.splitlines()]
+    lines = [line for line in lines if line]
+    start = 1 if len(lines[0]) > 1 else 2  # counts on the header line, or on the next
+    if len(lines) < start + n_v + n_f:
+        raise MeshError(f"truncated OFF: expected {n_v} vertex and {n_f} face lines")
+    try:
+        vertices = np.array([line[:3] for line in lines[start : start + n_v]], dtype=np.float64)
+        polygons = [
+            [int(i) for i in line[1 : 1 + int(line[0])]]
+            for line in lines[start + n_v : start + n_v + n_f]
+        ]
+    except ValueError as exc:
+        raise MeshError(f"malformed OFF: {exc}") from None
+    return vertices, triangulate(polygons)
+
+
+def triangulate(polygons: list[list[int]]) -> np.ndarray:
+    """Split polygons into triangle fans.
+
+    Parameters
+    ----------
+    polygons : list of list of int
+        Vertex indices of each polygon; polygons with fewer than 3 vertices are dropped.
+
+    Returns
+    -------
+    faces : (m, 3) int64
+        Triangles ``(p[0], p[i], p[i + 1])``; exact for convex polygons.
+    """
+    tris = [(p[0], p[i], p[i + 1]) for p in polygons for i in range(1, len(p) - 1)]
+    return np.array(tris, dtype=np.int64).reshape(-1, 3)
+
+
+def _as_indices(values: np.ndarray) -> np.ndarray:
+    """Float array to int64 indices, rejecting non-integral values."""
+    indices = values.astype(np.int64)
+    if not np.array_equal(indices, values):
+        raise MeshError("face indices are not integers")
+    return indices
+
+
+def _parse_trimesh(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray]:
+    """Parse OBJ, PLY or STL bytes with trimesh, without its own processing."""
+    try:
+        import trimesh
+    except ImportError:
+        raise MissingDependencyError("reading OBJ, PLY and STL needs trimesh") from None
+    import io
+
+    try:
+        loaded = trimesh.load(io.BytesIO(data), file_type=suffix[1:], process=False, force="mesh")
+        return np.asarray(loaded.vertices), np.asarray(loaded.faces)
+    except Exception as exc:  # trimesh raises many types on malformed files
+        raise MeshError(f"malformed {suffix[1:].upper()}: {exc}") from None
+
+
+def find_meshes(paths: Iterable[str | os.PathLike]) -> Iterator[tuple[Path, str]]:
+    """Mesh files under some files and folders, in a stable order, with their names.
+
+    Folders are walked recursively (sorted, hidden entries skipped) for OFF, OBJ, PLY and STL
+    files; a file given directly is taken whatever its extension, so that reading it reports
+    what is wrong with it.
+
+    Parameters
+    ----------
+    paths : iterable of str or path-like
+        Files and folders.
+
+    Yields
+    ------
+    path : Path
+        A mesh file.
+    name : str
+        Its path relative to the folder given (POSIX separators), or its file name when it was
+        given directly.
+    """
+    for root in map(Path, paths):
+        if not root.is_dir():
+            yield root, root.name
+            continue
+        for folder, dirs, files in os.walk(root):
+            dirs[:] = sorted(d for d in dirs if not d.startswith("."))
+            for file in sorted(files):
+                if Path(file).suffix.lower() in MESH_SUFFIXES and not file.startswith("."):
+                    path = Path(folder) / file
+                    yield path, path.relative_to(root).as_posix()

@@ -1,0 +1,66 @@
+"""The parameters of a signature: one frozen dataclass, stored in every index."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, fields
+
+
+@dataclass(frozen=True)
+class Params:
+    """Everything that decides a signature's values.
+
+    Two signatures are comparable only when they were made with equal parameters, so an index
+    stores these and a query recomputes with the index's own.
+
+    Attributes
+    ----------
+    bins : int
+        Number of histogram bins (paper section 2.3: 200).
+    low, high : float
+        Outer edges of the histogram. The default bins are centred on the integers -99..100,
+        the paper's "200 uniform bins spanning [-99, 100]" read as Matlab's ``hist(x, -99:100)``.
+        Ignored when ``normalize`` is set, which uses [0, 1].
+    samples_per_face : int
+        Random surface samples per face (paper: 5|F|).
+    seed : int
+        Seed of the sampling, so one mesh always gives the same signature bit for bit.
+    normalize : bool
+        Normalise phi to [0, 1] before the histogram (the variant of paper section 3.1).
+    mollify : float
+        Intrinsic mollification of degenerate triangles, relative to the mean edge length
+        (Sharp and Crane 2020); 0 disables it.
+    """
+
+    bins: int = 200
+    low: float = -99.5
+    high: float = 100.5
+    samples_per_face: int = 5
+    seed: int = 0
+    normalize: bool = False
+    mollify: float = 1e-5
+
+    def __post_init__(self) -> None:
+        if self.bins < 1 or self.samples_per_face < 0 or not self.low < self.high:
+            raise ValueError(f"invalid parameters: {self}")
+        if self.mollify < 0:
+            raise ValueError("mollify must be >= 0")
+
+    @property
+    def edges(self) -> tuple[float, float]:
+        """The histogram's outer edges (low, high) actually used."""
+        return (0.0, 1.0) if self.normalize else (self.low, self.high)
+
+    def to_json(self) -> str:
+        """Serialise to a JSON object with sorted keys."""
+        return json.dumps(asdict(self), sort_keys=True)
+
+    @classmethod
+    def from_json(cls, text: str) -> Params:
+        """Parse what `to_json` wrote; unknown keys raise ``ValueError``."""
+        data = json.loads(text)
+        known = {f.name for f in fields(cls)}
+        unknown = set(data) - known
+        if unknown:
+            raise ValueError(f"unknown parameters {sorted(unknown)}")
+        return cls(**data)

@@ -1,0 +1,79 @@
+import numpy as np
+import pytest
+from conftest import icosphere, random_rotation, torus
+
+from cfsig import geometry
+from cfsig.conformal import available_solvers, conformal_factor, solve_laplacian
+from cfsig.errors import SolverError
+from cfsig.mesh import clean_mesh
+
+
+def _bumpy(seed=0):
+    v, f = icosphere(3)
+    # an ellipsoid with a long extrusion along +x: phi must be largest at its tip
+    v = v * [1.0, 0.6, 0.5]
+    v[:, 0] += 1.5 * np.clip(v[:, 0], 0, None) ** 4
+    return v, f
+
+
+def test_phi_solves_equation_with_zero_mean():
+    v, f = _bumpy()
+    cf = conformal_factor(clean_mesh(v, f))
+    lap = geometry.cotan_laplacian(geometry.edge_lengths(v, f), f, len(v))
+    assert np.allclose(lap @ cf.phi, cf.target - cf.curvature, atol=1e-9)
+    assert abs(cf.phi.mean()) < 1e-12
+
+
+def test_phi_positive_on_extrusion():
+    v, f = _bumpy()
+    cf = conformal_factor(clean_mesh(v, f))
+    assert np.argmax(cf.phi) == np.argmax(v[:, 0])
+    assert cf.phi[np.argmax(v[:, 0])] > 0
+
+
+def test_invariant_to_rigid_motion_and_scale():
+    v, f = _bumpy()
+    base = conformal_factor(clean_mesh(v, f)).phi
+    moved = 3.7 * v @ random_rotation(2).T + [10.0, -4.0, 2.0]
+    assert np.allclose(conformal_factor(clean_mesh(moved, f)).phi, base, atol=1e-8)
+
+
+@pytest.mark.skipif("cholmod" not in available_solvers(), reason="CHOLMOD binding not installed")
+def test_solvers_agree():
+    v, f = _bumpy()
+    mesh = clean_mesh(v, f)
+    a = conformal_factor(mesh, solver="scipy").phi
+    b = conformal_factor(mesh, solver="cholmod").phi
+    assert np.allclose(a, b, atol=1e-9)
+
+
+def test_per_component_zero_mean():
+    v1, f1 = _bumpy()
+    v2, f2 = torus(nu=24, nv=8)
+    mesh = clean_mesh(np.vstack([v1, v2 + 9]), np.vstack([f1, f2 + len(v1)]))
+    cf = conformal_factor(mesh)
+    assert cf.n_components == 2
+    assert abs(cf.phi[: len(v1)].mean()) < 1e-12
+    assert abs(cf.phi[len(v1) :].mean()) < 1e-12
+    # each component is solved as if alone
+    alone = conformal_factor(clean_mesh(v1, f1)).phi
+    assert np.allclose(cf.phi[: len(v1)], alone, atol=1e-9)
+
+
+def test_curvature_error_small_on_smooth_mesh(sphere):
+    v, f = sphere
+    cf = conformal_factor(clean_mesh(v * [1, 0.8, 0.6], f))
+    assert 0 <= cf.curvature_error < 1e-3
+    assert np.isfinite(cf.curvature_error)
+
+
+def test_non_finite_system_raises():
+    lap = geometry.cotan_laplacian(np.ones((1, 3)), np.array([[0, 1, 2]]), 3)
+    with pytest.raises(SolverError):
+        solve_laplacian(lap, np.array([np.nan, 0, 0]), np.zeros(3, int))
+
+
+def test_unknown_solver():
+    v, f = icosphere(1)
+    with pytest.raises(ValueError, match="unknown solver"):
+        conformal_factor(clean_mesh(v, f), solver="magic")

@@ -1,0 +1,112 @@
+import igl
+import numpy as np
+import pytest
+from conftest import disk, icosphere, open_cylinder, torus
+
+from cfsig import geometry
+
+
+def _curvature(v, f):
+    lengths = geometry.edge_lengths(v, f)
+    boundary = geometry.boundary_vertices(f, len(v))
+    return geometry.angle_defect(geometry.corner_angles(lengths), f, boundary)
+
+
+@pytest.mark.parametrize(
+    ("mesh", "chi"),
+    [(icosphere(2), 2), (torus(), 0), (disk(), 1), (open_cylinder(), 0)],
+    ids=["sphere", "torus", "disk", "cylinder"],
+)
+def test_gauss_bonnet(mesh, chi):
+    v, f = mesh
+    assert _curvature(v, f).sum() == pytest.approx(2 * np.pi * chi, abs=1e-9)
+
+
+def test_boundary_curvature_is_pi_minus_angles():
+    v, f = disk()
+    k = _curvature(v, f)
+    boundary = geometry.boundary_vertices(f, len(v))
+    assert boundary.sum() == 32
+    # A flat disk: interior vertices have zero curvature, the rim carries all of 2 pi.
+    assert np.allclose(k[~boundary], 0, atol=1e-12)
+    assert k[boundary].sum() == pytest.approx(2 * np.pi)
+
+
+def test_matches_libigl_on_closed_mesh():
+    v, f = torus()
+    lengths = geometry.edge_lengths(v, f)
+    ours = geometry.cotan_laplacian(lengths, f, len(v))
+    assert abs(ours - igl.cotmatrix(v, f)).max() < 1e-12
+    assert np.allclose(_curvature(v, f), igl.gaussian_curvature(v, f), atol=1e-12)
+
+
+def test_laplacian_constants_in_null_space_and_symmetric(sphere):
+    v, f = sphere
+    lap = geometry.cotan_laplacian(geometry.edge_lengths(v, f), f, len(v))
+    assert np.abs(lap @ np.ones(len(v))).max() < 1e-12
+    assert abs(lap - lap.T).max() < 1e-14
+    x = np.random.default_rng(0).standard_normal(len(v))
+    assert x @ (lap @ x) < 0  # negative semidefinite, as libigl's cotmatrix
+
+
+def test_curvature_change_under_metric_scaling_is_minus_laplacian(sphere):
+    # Scaling edge ij by exp(eps (u_i + u_j) / 2) changes the angle defects by -eps L u to
+    # first order: the linearisation behind eq. (1) and the curvature error of section 3.4.
+    v, f = sphere
+    lengths = geometry.edge_lengths(v, f)
+    u = np.random.default_rng(1).standard_normal(len(v))
+    eps = 1e-6
+    edge_u = u[f][:, [1, 2, 0]] + u[f][:, [2, 0, 1]]
+    boundary = np.zeros(len(v), bool)
+    k0 = geometry.angle_defect(geometry.corner_angles(lengths), f, boundary)
+    k1 = geometry.angle_defect(
+        geometry.corner_angles(lengths * np.exp(eps * edge_u / 2)), f, boundary
+    )
+    lap = geometry.cotan_laplacian(lengths, f, len(v))
+    assert np.allclose((k1 - k0) / eps, -(lap @ u), atol=1e-5)
+
+
+def test_areas_match_cross_product(sphere):
+    v, f = sphere
+    expected = 0.5 * np.linalg.norm(
+        np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1
+    )
+    assert np.allclose(geometry.face_areas(geometry.edge_lengths(v, f)), expected)
+    va = geometry.vertex_areas(expected, f, len(v))
+    assert va.sum() == pytest.approx(expected.sum())
+
+
+def test_mollify_leaves_good_meshes_alone_and_fixes_degenerate(sphere):
+    v, f = sphere
+    lengths = geometry.edge_lengths(v, f)
+    same, delta = geometry.mollify(lengths, 1e-5)
+    assert delta == 0 and same is lengths
+    flat = np.array([[1.0, 1.0, 2.0], [1.0, 2.0, 3.0]])  # zero-area triangles
+    fixed, delta = geometry.mollify(flat, 1e-5)
+    assert delta > 0
+    assert (geometry.face_areas(fixed) > 0).all()
+    assert np.isfinite(geometry.corner_angles(fixed)).all()
+
+
+def test_components_and_target_curvature():
+    v1, f1 = icosphere(1)
+    v2, f2 = torus(nu=12, nv=6)
+    v = np.vstack([v1, v2 + 5])
+    f = np.vstack([f1, f2 + len(v1)])
+    count, labels = geometry.components(f, len(v))
+    assert count == 2
+    k = _curvature(v, f)
+    lengths = geometry.edge_lengths(v, f)
+    va = geometry.vertex_areas(geometry.face_areas(lengths), f, len(v))
+    target = geometry.target_curvature(k, va, labels)
+    for c in range(2):
+        assert target[labels == c].sum() == pytest.approx(k[labels == c].sum(), abs=1e-9)
+    # uniform: proportional to vertex area within a component
+    ratio = target[labels == 0] / va[labels == 0]
+    assert np.allclose(ratio, ratio[0])
+
+
+def test_non_manifold_edges_are_counted():
+    f = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    edges, counts = geometry.edge_face_counts(f, 5)
+    assert counts[(edges == [0, 1]).all(axis=1)][0] == 3

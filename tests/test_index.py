@@ -1,0 +1,96 @@
+import h5py
+import numpy as np
+import pytest
+
+from cfsig.errors import IndexFileError
+from cfsig.index import Entry, IndexReader, IndexWriter
+from cfsig.params import Params
+from cfsig.search import l1_distances, nearest, search
+from cfsig.signature import Signature
+
+
+def _sig(seed, bins=200):
+    h = np.random.default_rng(seed).random(bins)
+    return Signature(h / h.sum(), np.zeros(3), 3, 1, 1, 0.0, (), 0.0, f"{seed:064d}")
+
+
+def _build(path, n=10, params=Params()):
+    with IndexWriter(path, params) as w:
+        for i in range(n):
+            w.add(Entry(f"c{i % 3}/{i}.off", f"c{i % 3}", f"/data/c{i % 3}/{i}.off"), _sig(i))
+    return [_sig(i).histogram for i in range(n)]
+
+
+def test_round_trip(tmp_path):
+    hists = _build(tmp_path / "i.h5")
+    with IndexReader(tmp_path / "i.h5") as r:
+        assert len(r) == 10 and r.params == Params()
+        assert np.allclose(r.signatures[:], hists, atol=1e-7)
+        assert r.entries([4, 1]) == [
+            Entry("c1/4.off", "c1", "/data/c1/4.off"),
+            Entry("c1/1.off", "c1", "/data/c1/1.off"),
+        ]
+        assert list(r.column("labels")) == [f"c{i % 3}" for i in range(10)]
+
+
+def test_update_replaces_by_name(tmp_path):
+    path = tmp_path / "i.h5"
+    _build(path, 4)
+    with IndexWriter(path, Params()) as w:
+        w.add(Entry("c1/1.off", "c1", "/x"), _sig(99))
+        w.add(Entry("new.off", "z", "/y"), _sig(5))
+    with IndexReader(path) as r:
+        assert len(r) == 5
+        assert np.allclose(r.signatures[1], _sig(99).histogram, atol=1e-7)
+        assert r.column("names")[4] == "new.off"
+
+
+def test_other_params_refused(tmp_path):
+    _build(tmp_path / "i.h5", 2)
+    with pytest.raises(IndexFileError, match="other parameters"):
+        IndexWriter(tmp_path / "i.h5", Params(seed=1))
+
+
+def test_second_writer_refused(tmp_path):
+    with IndexWriter(tmp_path / "i.h5", Params()):
+        with pytest.raises(IndexFileError, match="another process"):
+            IndexWriter(tmp_path / "i.h5", Params())
+
+
+@pytest.mark.parametrize("kind", ["missing", "garbage", "foreign", "newer"])
+def test_bad_index_files(tmp_path, kind):
+    path = tmp_path / "i.h5"
+    if kind == "garbage":
+        path.write_bytes(b"not hdf5 at all" * 100)
+    elif kind == "foreign":
+        with h5py.File(path, "w") as f:
+            f["x"] = [1, 2, 3]
+    elif kind == "newer":
+        _build(path, 2)
+        with h5py.File(path, "a") as f:
+            f.attrs["format_version"] = 99
+    with pytest.raises(IndexFileError, match=str(path)):
+        IndexReader(path)
+
+
+def test_nearest_matches_brute_force(tmp_path, monkeypatch):
+    import cfsig.search
+
+    monkeypatch.setattr(cfsig.search, "_BLOCK_ROWS", 7)  # several blocks
+    hists = np.array(_build(tmp_path / "i.h5", 30))
+    queries = np.array([_sig(100).histogram, _sig(101).histogram])
+    with IndexReader(tmp_path / "i.h5") as r:
+        rows, dist = nearest(r, queries, 5)
+        hits = search(r, queries[:1], 3)
+    brute = l1_distances(queries, hists)
+    for q in range(2):
+        assert list(rows[q]) == list(np.argsort(brute[q])[:5])
+        assert np.allclose(dist[q], np.sort(brute[q])[:5], atol=1e-5)
+    assert [h.rank for h in hits[0]] == [1, 2, 3]
+    assert hits[0][0].entry.name == f"c{rows[0][0] % 3}/{rows[0][0]}.off"
+
+
+def test_l1_distance():
+    a = np.array([[0.5, 0.5, 0.0]])
+    b = np.array([[0.0, 0.5, 0.5], [0.5, 0.5, 0.0]])
+    assert np.allclose(l1_distances(a, b), [[1.0, 0.0]])
