@@ -14,8 +14,8 @@ def _sig(seed, bins=200):
     return Signature(h / h.sum(), np.zeros(3), 3, 1, 1, 0.0, (), 0.0, f"{seed:064d}")
 
 
-def _build(path, n=10, params=Params()):
-    with IndexWriter(path, params) as w:
+def _build(path, n=10, params=None):
+    with IndexWriter(path, params or Params()) as w:
         for i in range(n):
             w.add(Entry(f"c{i % 3}/{i}.off", f"c{i % 3}", f"/data/c{i % 3}/{i}.off"), _sig(i))
     return [_sig(i).histogram for i in range(n)]

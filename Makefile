@@ -1,0 +1,27 @@
+# cfsig: `make demo` installs and runs the built-in demo; `make test` installs and runs the tests.
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+
+.PHONY: demo test lint bench clean
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+
+demo: $(BIN)/python
+	$(BIN)/pip install -q -e '.[cholmod,plots]'
+	$(BIN)/cfsig demo --out cfsig-demo
+
+test: $(BIN)/python
+	$(BIN)/pip install -q -e '.[test]'
+	$(BIN)/ruff check cfsig tests benchmarks
+	$(BIN)/ruff format --check cfsig tests benchmarks
+	$(BIN)/pytest -q
+
+bench: $(BIN)/python
+	$(BIN)/pip install -q -e '.[test,bench]'
+	$(BIN)/python benchmarks/retrieval.py
+
+clean:
+	rm -rf $(VENV) cfsig-demo .pytest_cache .ruff_cache

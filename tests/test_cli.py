@@ -1,0 +1,148 @@
+import json
+
+import h5py
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cfsig import __version__
+from cfsig.cli import EXIT_SKIPPED, main
+from cfsig.demo import make_demo_collection
+
+
+@pytest.fixture(scope="module")
+def collection(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("demo") / "meshes"
+    make_demo_collection(folder, per_class=3)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def built_index(collection, tmp_path_factory):
+    path = tmp_path_factory.mktemp("index") / "demo.h5"
+    result = CliRunner().invoke(main, ["index", str(collection), "-o", str(path), "-j", "2"])
+    assert result.exit_code == 0, result.output
+    return path
+
+
+def _run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def test_version_and_help():
+    assert __version__ in _run("--version").output
+    for command in ["compute", "index", "query", "evaluate", "demo"]:
+        result = _run(command, "--help")
+        assert result.exit_code == 0 and "Example" in result.output
+
+
+def test_compute_text_json_and_save(collection, tmp_path):
+    mesh = collection / "limbs2" / "limbs2-0.off"
+    result = _run("compute", mesh)
+    assert result.exit_code == 0
+    assert "1 component(s)" in result.output and "vertices" in result.output
+    result = _run("compute", "--json", "--save", tmp_path, mesh)
+    row = json.loads(result.stdout)[0]
+    assert row["components"] == 1 and row["phi_min"] < 0 < row["phi_max"]
+    saved = np.load(tmp_path / "limbs2-0.npz")
+    assert saved["signature"].shape == (200,) and len(saved["phi"]) == row["vertices"]
+
+
+def test_compute_bad_file_one_line_error(tmp_path):
+    bad = tmp_path / "bad.off"
+    bad.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n")
+    result = _run("compute", bad)
+    assert result.exit_code == 1
+    assert result.output.strip().splitlines() == [
+        f"Error: {bad}: " + result.output.split(": ", 2)[2].strip()
+    ]
+    assert "Traceback" not in result.output
+
+
+def test_index_stores_names_labels_and_metadata(built_index):
+    with h5py.File(built_index, "r") as f:
+        names = [n.decode() for n in f["names"][:]]
+        labels = [n.decode() for n in f["labels"][:]]
+        assert len(names) == 18 and "torus/torus-1.off" in names
+        assert labels[names.index("torus/torus-1.off")] == "torus"
+        assert f["signatures"].shape == (18, 200)
+        assert np.isfinite(f["signatures"][:]).all()
+        assert (f["n_vertices"][:] > 1000).all()
+        assert json.loads(f.attrs["params"])["bins"] == 200
+        assert f.attrs["format_version"] == 1
+
+
+def test_index_again_adds_only_new_and_changed(collection, tmp_path):
+    index = tmp_path / "i.h5"
+    assert _run("index", collection / "capsule", "-o", index, "-j", "1").exit_code == 0
+    before = h5py.File(index, "r")["signatures"][:]
+    (collection / "capsule" / "extra").mkdir(exist_ok=True)
+    extra = collection / "capsule" / "extra" / "c.off"
+    extra.write_bytes((collection / "torus" / "torus-0.off").read_bytes())
+    try:
+        result = _run("index", collection / "capsule", "-o", index, "-j", "1")
+    finally:
+        extra.unlink()
+        extra.parent.rmdir()
+    assert result.exit_code == 0 and "4 meshes indexed" in result.output
+    with h5py.File(index, "r") as f:
+        assert np.array_equal(f["signatures"][:3], before)
+        assert f["names"][3].decode() == "extra/c.off"
+
+
+def test_index_skips_bad_files_with_distinct_status(collection, tmp_path):
+    folder = tmp_path / "mixed" / "cls"
+    folder.mkdir(parents=True)
+    (folder / "good.off").write_bytes((collection / "capsule" / "capsule-0.off").read_bytes())
+    (folder / "bad.off").write_text("garbage")
+    result = _run("index", folder.parent, "-o", tmp_path / "i.h5", "-j", "1")
+    assert result.exit_code == EXIT_SKIPPED
+    assert "1 meshes indexed" in result.output and "bad.off" in result.output
+    strict = _run("index", folder.parent, "-o", tmp_path / "j.h5", "-j", "1", "--strict")
+    assert strict.exit_code == 1
+
+
+def test_query_text_and_json(built_index, collection):
+    mesh = collection / "limbs3" / "limbs3-1.off"
+    result = _run("query", built_index, mesh, "-k", "3")
+    assert result.exit_code == 0 and "limbs3/limbs3-1.off" in result.output
+    hits = json.loads(_run("query", built_index, mesh, "-k", "3", "--json").stdout)
+    assert [h["rank"] for h in hits] == [1, 2, 3]
+    assert set(hits[0]) == {"rank", "distance", "name", "label"}
+    assert hits[0]["distance"] == pytest.approx(0, abs=1e-6)
+    assert all(h["label"] == "limbs3" for h in hits)
+    both = json.loads(_run("query", built_index, mesh, mesh, "-k", "2", "--json").stdout)
+    assert len(both) == 2 and len(both[0]) == 2
+
+
+def test_query_errors(tmp_path, collection):
+    result = _run("query", tmp_path / "none.h5", collection / "torus" / "torus-0.off")
+    assert result.exit_code == 1 and "no such index" in result.output
+
+
+def test_evaluate_folder_index_and_cla(collection, built_index, tmp_path):
+    result = _run("evaluate", collection, "--json", "-j", "1")
+    report = json.loads(result.stdout)
+    assert set(report) == {"measures", "per_class", "precision_recall", "count"}
+    assert set(report["measures"]) == {"NN", "FT", "ST", "E", "DCG", "mAP"}
+    assert report["count"] == 18 and len(report["precision_recall"]) == 20
+    from_index = json.loads(_run("evaluate", "--index", built_index, "--json").stdout)
+    assert from_index["measures"] == pytest.approx(report["measures"], abs=1e-6)
+    # a .cla file that puts everything in two classes by file stem
+    lines = ["PSB 1", "2 18"]
+    names = sorted(p.stem for p in collection.rglob("*.off"))
+    for c, group in enumerate([names[:9], names[9:]]):
+        lines += ["", f"class{c} 0 {len(group)}", *group]
+    (tmp_path / "x.cla").write_text("\n".join(lines) + "\n")
+    cla = json.loads(
+        _run("evaluate", "--index", built_index, "--classes", tmp_path / "x.cla", "--json").output
+    )
+    assert set(cla["per_class"]) == {"class0", "class1"}
+    text = _run("evaluate", "--index", built_index)
+    assert "FT" in text.output and "torus" in text.output
+
+
+def test_demo_command(tmp_path):
+    result = _run("demo", "--out", tmp_path)
+    assert result.exit_code == 0, result.output
+    assert "30 meshes indexed" in result.output and "queries" in result.output

@@ -1,0 +1,95 @@
+import igl
+import numpy as np
+import pytest
+from conftest import random_rotation
+
+from cfsig import geometry
+from cfsig.demo import limbed_body
+from cfsig.mesh import clean_mesh
+from cfsig.params import Params
+from cfsig.signature import compute_signature, histogram, sample_phi
+
+
+def _sig(v, f, params=None):
+    return compute_signature(clean_mesh(v, f), params or Params()).histogram
+
+
+def _l1(a, b):
+    return float(np.abs(a - b).sum())
+
+
+@pytest.fixture(scope="module")
+def body():
+    return limbed_body(3, 0)
+
+
+@pytest.fixture(scope="module")
+def reference(body):
+    """The body's signature and its distance to a different class (2 and 5 limbs)."""
+    sig = _sig(*body)
+    other = min(_l1(sig, _sig(*limbed_body(2, 0))), _l1(sig, _sig(*limbed_body(5, 0))))
+    return sig, other
+
+
+def test_histogram_sums_to_one_and_is_deterministic(body):
+    a, b = _sig(*body), _sig(*body)
+    assert a.shape == (200,)
+    assert a.sum() == pytest.approx(1.0)
+    assert np.array_equal(a, b)  # bit for bit
+
+
+def test_bins_centred_on_integers():
+    params = Params()
+    h = histogram(np.array([-0.49, 0.0, 0.49, 0.51, -500.0, 500.0]), params)
+    assert h[99] == pytest.approx(3 / 6)  # bin 99 is centred on 0: [-0.5, 0.5)
+    assert h[100] == pytest.approx(1 / 6)
+    assert h[0] == pytest.approx(1 / 6) and h[199] == pytest.approx(1 / 6)  # clipped ends
+
+
+def test_sampling_is_uniform_by_area():
+    # two triangles, the second three times larger: a quarter of the samples in the first
+    faces = np.array([[0, 1, 2], [3, 4, 5]])
+    phi = np.array([0.0, 0.0, 0.0, 1.0, 1.0, 1.0])
+    samples = sample_phi(faces, np.array([1.0, 3.0]), phi, 40000, seed=0)
+    assert (samples == 0).mean() == pytest.approx(0.25, abs=0.01)
+
+
+def test_barycentric_interpolation_stays_in_range():
+    faces = np.array([[0, 1, 2]])
+    samples = sample_phi(faces, np.array([1.0]), np.array([0.0, 1.0, 2.0]), 10000, seed=3)
+    assert samples.min() >= 0 and samples.max() <= 2
+    assert samples.mean() == pytest.approx(1.0, abs=0.02)  # the centroid's value
+
+
+def test_invariant_to_rigid_motion_and_scale(body, reference):
+    v, f = body
+    moved = 0.3 * v @ random_rotation(5).T + 7.0
+    assert _l1(_sig(moved, f), reference[0]) < 1e-9
+
+
+def test_subdivision_gives_close_signature(body, reference):
+    sig, other = reference
+    v, f = igl.upsample(*body)
+    assert _l1(_sig(v, f), sig) < 0.1 * other
+
+
+def test_bent_pose_gives_close_signature(reference):
+    sig, other = reference
+    for pose in (1, 2, 3):
+        assert _l1(_sig(*limbed_body(3, pose)), sig) < 0.1 * other
+
+
+def test_noise_keeps_signature_close(body, reference):
+    # paper section 3.2: Gaussian noise of 20% of the mean edge length
+    sig, other = reference
+    v, f = body
+    sigma = 0.2 * geometry.edge_lengths(v, f).mean()
+    noisy = v + np.random.default_rng(0).normal(scale=sigma, size=v.shape)
+    assert _l1(_sig(noisy, f), sig) < 0.2 * other
+
+
+def test_normalized_variant(body):
+    params = Params(normalize=True)
+    cf = compute_signature(clean_mesh(*body), params)
+    assert cf.histogram.sum() == pytest.approx(1.0)
+    assert cf.histogram[0] > 0 and cf.histogram[-1] > 0  # min and max phi land in the end bins
