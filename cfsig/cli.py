@@ -25,22 +25,31 @@ from .signature import signature_file
 
 EXIT_ERROR = 1
 EXIT_SKIPPED = 3
-_COMMIT_EVERY = (200, 30.0)  # records, seconds
+_COMMIT_SECONDS = 30.0
 
 _params_options = [
-    click.option("--normalize/--no-normalize", default=None,
-                 help="Normalise phi to [0, 1] before the histogram (paper section 3.1)."),
+    click.option(
+        "--normalize/--no-normalize",
+        default=None,
+        help="Normalise phi to [0, 1] before the histogram (paper section 3.1).",
+    ),
     click.option("--seed", type=int, default=None, help="Seed of the surface sampling [0]."),
     click.option("--bins", type=int, default=None, help="Histogram bins [200]."),
-]  # fmt: skip
+]
 _solver_option = click.option(
-    "--solver", type=click.Choice(SOLVERS), default="auto", show_default=True,
+    "--solver",
+    type=click.Choice(SOLVERS),
+    default="auto",
+    show_default=True,
     help="Sparse solver: CHOLMOD when installed (auto), or SciPy's SuperLU.",
-)  # fmt: skip
+)
 _jobs_option = click.option(
-    "--jobs", "-j", type=click.IntRange(min=1), default=None,
+    "--jobs",
+    "-j",
+    type=click.IntRange(min=1),
+    default=None,
     help="Worker processes [all cores].",
-)  # fmt: skip
+)
 _json_option = click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 
 
@@ -97,8 +106,11 @@ def main() -> None:
 @_with(_params_options)
 @_solver_option
 @_json_option
-@click.option("--save", type=click.Path(file_okay=False, path_type=Path),
-              help="Write DIR/<name>.npz with the signature and per-vertex phi.")  # fmt: skip
+@click.option(
+    "--save",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Write DIR/<name>.npz with the signature and per-vertex phi.",
+)
 def compute(meshes, normalize, seed, bins, solver, as_json, save) -> None:
     """Compute the conformal factor and signature of each mesh.
 
@@ -122,8 +134,12 @@ def compute(meshes, normalize, seed, bins, solver, as_json, save) -> None:
         rows.append(row)
         if save:
             save.mkdir(parents=True, exist_ok=True)
-            np.savez(save / f"{path.stem}.npz", signature=sig.histogram, phi=sig.phi,
-                     params=params.to_json())  # fmt: skip
+            np.savez(
+                save / f"{path.stem}.npz",
+                signature=sig.histogram,
+                phi=sig.phi,
+                params=params.to_json(),
+            )
         if not as_json:
             click.echo(
                 f"{path}: {row['vertices']} vertices, {row['faces']} faces, "
@@ -140,11 +156,16 @@ def _describe(path: Path, sig) -> dict:
     """The facts `compute` reports about one signature."""
     low, high = sig.phi_range
     return {
-        "file": str(path), "vertices": sig.n_vertices, "faces": sig.n_faces,
-        "components": sig.n_components, "phi_min": low, "phi_max": high,
-        "curvature_error": sig.curvature_error, "seconds": sig.seconds,
+        "file": str(path),
+        "vertices": sig.n_vertices,
+        "faces": sig.n_faces,
+        "components": sig.n_components,
+        "phi_min": low,
+        "phi_max": high,
+        "curvature_error": sig.curvature_error,
+        "seconds": sig.seconds,
         "repairs": list(sig.repairs),
-    }  # fmt: skip
+    }
 
 
 def _report_errors(errors: list[str]) -> None:
@@ -168,40 +189,54 @@ def _report_errors(errors: list[str]) -> None:
 @_solver_option
 @_jobs_option
 @click.option("--strict", is_flag=True, help="Stop at the first file that fails.")
-def index(paths, output, normalize, seed, bins, solver, jobs, strict) -> None:  # fmt: skip
+@click.option(
+    "--commit-every",
+    type=click.IntRange(min=1),
+    default=200,
+    show_default=True,
+    help="Commit to the index file after this many meshes (and every 30 s).",
+)
+def index(paths, output, normalize, seed, bins, solver, jobs, strict, commit_every) -> None:
     """Index mesh files and folders (recursively: OFF, OBJ, PLY, STL) into an HDF5 file.
 
     Each mesh is stored under its path relative to the folder given, labelled with the name of
     the folder that holds it. Running the command again adds new and changed files only.
-    Files that fail are skipped and listed at the end (exit status 3).
+    Files that fail are skipped and listed at the end (exit status 3). The index is committed
+    atomically as it grows: after a crash or a kill, running the same command again completes it
+    without recomputing what was committed.
 
     \b
     Example:
       cfsig index shrec07/ -o shrec07.h5 --jobs 2
     """
     try:
-        base = IndexReader(output).params if output.exists() else None
-    except CfsigError as exc:
-        _fail(str(exc))
-    params = _params(base, normalize=normalize, seed=seed, bins=bins)
-    try:
+        base = None
+        if output.exists():
+            with IndexReader(output) as reader:
+                base = reader.params
+        params = _params(base, normalize=normalize, seed=seed, bins=bins)
         with IndexWriter(output, params) as writer:
-            skipped = _index_into(writer, paths, solver, jobs, strict)
+            added, skipped = _index_into(writer, paths, solver, jobs, strict, commit_every)
     except CfsigError as exc:
         _fail(str(exc))
-    click.echo(f"{output}: {len(writer.known)} meshes indexed")
+    click.echo(f"{output}: {added} meshes added or updated, {len(writer.known)} in the index")
     _report_skipped(skipped, strict)
 
 
-def _index_into(writer: IndexWriter, paths, solver: str, jobs, strict: bool) -> list[str]:
-    """Compute and commit the new and changed meshes; return the failures."""
-    todo, names = [], {}
+def _index_into(
+    writer: IndexWriter, paths, solver: str, jobs, strict: bool, commit_every: int
+) -> tuple[int, list[str]]:
+    """Compute and commit the new and changed meshes; return their count and the failures."""
+    todo, names, seen, skipped = [], {}, set(), []
     for path, name in find_meshes(paths):
-        names[path] = name
-        if writer.is_current(name, path):
+        if name in seen:
+            skipped.append(f"{path}: its name {name!r} is already taken by another file")
             continue
-        todo.append(path)
-    skipped, last_commit = [], time.monotonic()
+        seen.add(name)
+        names[path] = name
+        if not writer.is_current(name, path):
+            todo.append(path)
+    added, last_commit = 0, time.monotonic()
     outcomes = compute_many(todo, writer.params, solver, jobs)
     for outcome in _progress(outcomes, len(todo), "indexing"):
         if outcome.error:
@@ -211,10 +246,11 @@ def _index_into(writer: IndexWriter, paths, solver: str, jobs, strict: bool) -> 
             continue
         path = outcome.path
         writer.add(Entry(names[path], path.parent.name, str(path.resolve())), outcome.signature)
-        if writer.pending >= _COMMIT_EVERY[0] or time.monotonic() - last_commit > _COMMIT_EVERY[1]:
+        added += 1
+        if writer.pending >= commit_every or time.monotonic() - last_commit > _COMMIT_SECONDS:
             writer.commit()
             last_commit = time.monotonic()
-    return skipped
+    return added, skipped
 
 
 def _progress(iterable, total: int, what: str):
@@ -227,8 +263,13 @@ def _progress(iterable, total: int, what: str):
 @main.command()
 @click.argument("index_file", type=click.Path(dir_okay=False, path_type=Path))
 @click.argument("meshes", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("-k", type=click.IntRange(min=1), default=20, show_default=True,
-              help="Number of results per query.")  # fmt: skip
+@click.option(
+    "-k",
+    type=click.IntRange(min=1),
+    default=20,
+    show_default=True,
+    help="Number of results per query.",
+)
 @_solver_option
 @_json_option
 def query(index_file, meshes, k, solver, as_json) -> None:
@@ -256,7 +297,7 @@ def query(index_file, meshes, k, solver, as_json) -> None:
                     "label": h.entry.label,
                 }
                 for h in hits
-            ]  # fmt: skip
+            ]
             for hits in results
         ]
         click.echo(json.dumps(lists[0] if len(lists) == 1 else lists, indent=2))
@@ -285,8 +326,9 @@ def query(index_file, meshes, k, solver, as_json) -> None:
 @_jobs_option
 @click.option("--strict", is_flag=True, help="Stop at the first file that fails.")
 @_json_option
-def evaluate(folder, classes, index_file, normalize, seed, bins, solver, jobs, strict,
-             as_json) -> None:  # fmt: skip
+def evaluate(
+    folder, classes, index_file, normalize, seed, bins, solver, jobs, strict, as_json
+) -> None:
     """Retrieval measures of a labelled collection (leave-one-out).
 
     Each subfolder of FOLDER is a class (or --classes maps file ids to classes). Prints the
@@ -367,7 +409,7 @@ def _format_report(report) -> str:
     help="Folder for the generated meshes and the index.",
 )
 @click.pass_context
-def demo(ctx: click.Context, out: Path) -> None:  # fmt: skip
+def demo(ctx: click.Context, out: Path) -> None:
     """Run cfsig end to end on a generated collection: index, query, evaluate.
 
     Writes 30 synthetic meshes in 6 classes (bodies with 1, 2, 3 and 5 limbs, tori, capsules;

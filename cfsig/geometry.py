@@ -82,8 +82,14 @@ def corner_angles(lengths: np.ndarray) -> np.ndarray:
     a, b, c = lengths.T
     a2, b2, c2 = a * a, b * b, c * c
     with np.errstate(divide="ignore", invalid="ignore"):
-        cos = np.stack([(b2 + c2 - a2) / (2 * b * c), (c2 + a2 - b2) / (2 * c * a),
-                        (a2 + b2 - c2) / (2 * a * b)], axis=1)  # fmt: skip
+        cos = np.stack(
+            [
+                (b2 + c2 - a2) / (2 * b * c),
+                (c2 + a2 - b2) / (2 * c * a),
+                (a2 + b2 - c2) / (2 * a * b),
+            ],
+            axis=1,
+        )
     return np.arccos(np.clip(np.nan_to_num(cos, nan=1.0), -1.0, 1.0))
 
 

@@ -160,6 +160,8 @@ class IndexWriter:
         self.path = Path(path)
         self.params = params
         self._lock = _acquire_lock(self.path)
+        for stale in self.path.parent.glob(f".{self.path.name}.*.tmp"):
+            stale.unlink()  # left by a writer that was killed: only the lock holder makes these
         self._pending: list[tuple[Entry, Signature]] = []
         self.known: dict[str, tuple[int, str]] = {}
         if self.path.exists():
@@ -275,13 +277,18 @@ class IndexWriter:
 def _create_layout(f: h5py.File, params: Params) -> None:
     """Create the empty datasets and the header attributes."""
     f.attrs.update(
-        format=FORMAT, format_version=FORMAT_VERSION, params=params.to_json(),
+        format=FORMAT,
+        format_version=FORMAT_VERSION,
+        params=params.to_json(),
         cfsig_version=__version__,
-    )  # fmt: skip
+    )
     f.create_dataset(
-        "signatures", (0, params.bins), np.float32, maxshape=(None, params.bins),
+        "signatures",
+        (0, params.bins),
+        np.float32,
+        maxshape=(None, params.bins),
         chunks=(_CHUNK_ROWS, params.bins),
-    )  # fmt: skip
+    )
     dtypes = {**{k: _STRING for k in _TEXT}, "sha256": "S64", **_META}
     for key, dtype in dtypes.items():
         f.create_dataset(key, (0,), dtype, maxshape=(None,), chunks=(_CHUNK_ROWS,))

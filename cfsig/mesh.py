@@ -119,7 +119,8 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
     """Check a triangle mesh and repair what can be repaired soundly.
 
     Repairs: exactly coincident vertices are merged (STL files store triangle soups), faces that
-    repeat a vertex and repeated faces are dropped, unreferenced vertices are removed.
+    repeat a vertex and repeated faces are dropped, unreferenced vertices are removed, and
+    non-manifold vertices are split into one copy per sheet (`split_nonmanifold`).
 
     Parameters
     ----------
@@ -176,7 +177,82 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
         repairs.append(f"removed {int((~used).sum())} unreferenced vertices")
         remap = np.cumsum(used) - 1
         vertices, faces = vertices[used], remap[faces]
+    split_faces, copies = split_nonmanifold(faces, len(vertices))
+    if len(copies):
+        repairs.append(f"split {len(np.unique(copies))} non-manifold vertices into separate sheets")
+        vertices, faces = np.vstack([vertices, vertices[copies]]), split_faces
     return Mesh(vertices, faces, tuple(repairs))
+
+
+def split_nonmanifold(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """Give each sheet of faces around a vertex its own copy of that vertex.
+
+    The faces around a vertex form fans: maximal sequences of faces joined through edges that
+    belong to exactly two faces. A manifold vertex has one fan. A vertex where two parts touch,
+    or on an edge shared by three or more faces (a fin), has several; each fan after the first
+    gets a new vertex. The result has at most two faces per edge and one fan per vertex, so the
+    paper's angle defect and Laplacian apply; parts that touched only at vertices become
+    separate components.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+        Triangles over ``n_vertices`` vertices, all referenced.
+    n_vertices : int
+        Number of vertices n.
+
+    Returns
+    -------
+    faces : (m, 3) int64
+        Triangles over ``n + k`` vertices (unchanged when ``k == 0``).
+    copies : (k,) int64
+        For each new vertex ``n + i``, the vertex it copies.
+    """
+    fan = _fans(faces, n_vertices)
+    roots = fan == np.arange(fan.size)
+    if np.count_nonzero(roots) == n_vertices:
+        return faces, np.empty(0, dtype=np.int64)
+    n_fans = np.count_nonzero(roots)
+    fan = np.cumsum(roots)[fan] - 1
+    fan_vertex = np.empty(n_fans, dtype=np.int64)
+    fan_vertex[fan] = faces.ravel()
+    order = np.lexsort((np.arange(n_fans), fan_vertex))
+    first = np.ones(n_fans, dtype=bool)
+    first[1:] = fan_vertex[order][1:] != fan_vertex[order][:-1]
+    extra = order[~first]
+    new_id = fan_vertex.copy()
+    new_id[extra] = n_vertices + np.arange(len(extra))
+    return new_id[fan].reshape(faces.shape), fan_vertex[extra]
+
+
+def _fans(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """The smallest corner of the fan of every corner ``3f + j``, by pointer jumping."""
+    corner = np.arange(faces.size)
+    vertex = faces.ravel()
+    nxt = faces[:, [1, 2, 0]].ravel()  # half-edge 3f + j runs from corner 3f + j to the next
+    keys = np.minimum(vertex, nxt) * n_vertices + np.maximum(vertex, nxt)
+    order = np.argsort(keys)
+    sorted_keys = keys[order]
+    starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
+    lengths = np.diff(np.r_[starts, len(keys)])
+    pair = starts[lengths == 2]  # edges of exactly two faces join fans; others break them
+    twin = corner.copy()
+    twin[order[pair]], twin[order[pair + 1]] = order[pair + 1], order[pair]
+    prev_edge = corner - corner % 3 + (corner + 2) % 3  # the half-edge ending at this corner
+
+    def at_vertex(half: np.ndarray) -> np.ndarray:
+        """The corner at ``vertex`` of the face of each half-edge (orientation-agnostic)."""
+        following = half - half % 3 + (half + 1) % 3
+        return np.where(faces.ravel()[half] == vertex, half, following)
+
+    forward, backward = at_vertex(twin), at_vertex(twin[prev_edge])
+    label = corner
+    while True:
+        new = np.minimum(label, np.minimum(label[forward], label[backward]))
+        if np.array_equal(new, label):
+            break
+        label, forward, backward = new, forward[forward], backward[backward]
+    return label
 
 
 def _parse_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:

@@ -165,9 +165,15 @@ def compute_signature(mesh: Mesh, params: Params, solver: str = "auto") -> Signa
     if cf.mollified > 0:
         repairs += (f"mollified degenerate triangles (edges +{cf.mollified:.3g})",)
     return Signature(
-        hist, cf.phi, len(mesh.vertices), len(mesh.faces), cf.n_components,
-        cf.curvature_error, repairs, time.perf_counter() - start,
-    )  # fmt: skip
+        hist,
+        cf.phi,
+        len(mesh.vertices),
+        len(mesh.faces),
+        cf.n_components,
+        cf.curvature_error,
+        repairs,
+        time.perf_counter() - start,
+    )
 
 
 def signature_file(path: str | os.PathLike, params: Params, solver: str = "auto") -> Signature:

@@ -84,7 +84,7 @@ def test_index_again_adds_only_new_and_changed(collection, tmp_path):
     finally:
         extra.unlink()
         extra.parent.rmdir()
-    assert result.exit_code == 0 and "4 meshes indexed" in result.output
+    assert result.exit_code == 0 and "1 meshes added or updated, 4 in the index" in result.output
     with h5py.File(index, "r") as f:
         assert np.array_equal(f["signatures"][:3], before)
         assert f["names"][3].decode() == "extra/c.off"
@@ -97,7 +97,7 @@ def test_index_skips_bad_files_with_distinct_status(collection, tmp_path):
     (folder / "bad.off").write_text("garbage")
     result = _run("index", folder.parent, "-o", tmp_path / "i.h5", "-j", "1")
     assert result.exit_code == EXIT_SKIPPED
-    assert "1 meshes indexed" in result.output and "bad.off" in result.output
+    assert "1 in the index" in result.output and "bad.off" in result.output
     strict = _run("index", folder.parent, "-o", tmp_path / "j.h5", "-j", "1", "--strict")
     assert strict.exit_code == 1
 
@@ -145,4 +145,4 @@ def test_evaluate_folder_index_and_cla(collection, built_index, tmp_path):
 def test_demo_command(tmp_path):
     result = _run("demo", "--out", tmp_path)
     assert result.exit_code == 0, result.output
-    assert "30 meshes indexed" in result.output and "queries" in result.output
+    assert "30 in the index" in result.output and "queries" in result.output

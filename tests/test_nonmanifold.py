@@ -1,0 +1,80 @@
+"""Non-manifold input: split into manifold sheets, with signatures close to the manifold mesh."""
+
+import numpy as np
+import pytest
+from conftest import icosphere
+
+from cfsig import geometry
+from cfsig.demo import capsule, limbed_body
+from cfsig.mesh import clean_mesh, split_nonmanifold
+from cfsig.params import Params
+from cfsig.signature import compute_signature
+
+
+def _sig(v, f):
+    return compute_signature(clean_mesh(v, f), Params()).histogram
+
+
+def _l1(a, b):
+    return float(np.abs(a - b).sum())
+
+
+def test_manifold_mesh_is_untouched():
+    v, f = limbed_body(2, 0)
+    faces, copies = split_nonmanifold(f, len(v))
+    assert faces is f and len(copies) == 0
+
+
+def test_two_parts_touching_at_a_vertex_are_separated():
+    v1, f1 = icosphere(2)
+    v2, f2 = icosphere(1)
+    v2 = v2 + (v1[0] - v2[5])  # vertex 5 of the small sphere touches vertex 0 of the big one
+    glued_v = np.vstack([v1, np.delete(v2, 5, axis=0)])
+    remap = np.r_[np.arange(5), -1, np.arange(5, len(v2) - 1)] + len(v1)
+    remap[5] = 0
+    glued_f = np.vstack([f1, remap[f2]])
+    mesh = clean_mesh(glued_v, glued_f)
+    assert any("non-manifold" in r for r in mesh.repairs)
+    assert geometry.components(mesh.faces, len(mesh.vertices))[0] == 2
+    apart = np.vstack([v1, v2 + [0.0, 0.0, 1e-3]]), np.vstack([f1, f2 + len(v1)])
+    assert _l1(compute_signature(mesh, Params()).histogram, _sig(*apart)) < 1e-12
+
+
+@pytest.fixture(scope="module")
+def body():
+    v, f = limbed_body(3, 0)
+    sig = _sig(v, f)
+    other = min(_l1(sig, _sig(*limbed_body(2, 0))), _l1(sig, _sig(*capsule())))
+    return v, f, sig, other
+
+
+def test_fin_on_an_edge(body):
+    v, f, sig, other = body
+    a, b, c = f[100]
+    normal = np.cross(v[b] - v[a], v[c] - v[a])
+    tip = (v[a] + v[b]) / 2 + normal / np.linalg.norm(normal) * np.linalg.norm(v[b] - v[a])
+    fin_v = np.vstack([v, tip])
+    fin_f = np.vstack([f, [[a, b, len(v)]]])
+    _, counts = geometry.edge_face_counts(fin_f, len(fin_v))
+    assert counts.max() == 3  # really non-manifold
+    mesh = clean_mesh(fin_v, fin_f)
+    _, counts = geometry.edge_face_counts(mesh.faces, len(mesh.vertices))
+    assert counts.max() == 2
+    fin_sig = compute_signature(mesh, Params()).histogram
+    assert np.isfinite(fin_sig).all()
+    assert _l1(fin_sig, sig) < 0.1 * other
+
+
+def test_two_bodies_touching_at_a_vertex(body):
+    v, f, sig, other = body
+    cv, cf = capsule()
+    right, left = np.argmax(v[:, 0]), np.argmin(cv[:, 0])
+    touching_v = np.vstack([v, cv + (v[right] - cv[left])])
+    touching_v[len(v) + left] = v[right]  # the capsule's leftmost vertex meets the body's
+    apart_v = touching_v + np.r_[np.zeros(len(v)), np.full(len(cv), 1e-3)][:, None]
+    faces = np.vstack([f, cf + len(v)])
+    touching = clean_mesh(touching_v, faces)
+    assert any("merged 1 coincident" in r for r in touching.repairs)
+    assert any("non-manifold" in r for r in touching.repairs)
+    apart_sig = _sig(apart_v, faces)
+    assert _l1(compute_signature(touching, Params()).histogram, apart_sig) < 1e-12
