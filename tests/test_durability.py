@@ -1,0 +1,122 @@
+"""The index survives kills, concurrent writers and readers, and refuses files it cannot use."""
+
+import fcntl
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cfsig.cli import main
+from cfsig.demo import make_demo_collection
+from cfsig.index import IndexReader, IndexWriter
+from cfsig.params import Params
+
+
+@pytest.fixture(scope="module")
+def meshes(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("kill") / "meshes"
+    make_demo_collection(folder, per_class=4)
+    return folder
+
+
+def _index_cmd(folder, index):
+    return [sys.executable, "-m", "cfsig", "index", str(folder), "-o", str(index), "-j", "1",
+            "--commit-every", "1"]  # fmt: skip
+
+
+def _rows(index):
+    with IndexReader(index) as reader:
+        return list(reader.column("names"))
+
+
+def test_sigkill_mid_run_then_resume(meshes, tmp_path):
+    index = tmp_path / "i.h5"
+    total = len(list(meshes.rglob("*.off")))
+    committed_before = []
+    for delay in (0.3, 0.6):  # two kills at different moments of the run
+        proc = subprocess.Popen(_index_cmd(meshes, index), stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and len(_rows(index) if index.exists() else []) < 3:
+            time.sleep(0.05)
+        time.sleep(delay)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        names = _rows(index)  # the index opens after the kill
+        assert len(names) == len(set(names)) and len(names) >= len(committed_before)
+        assert names[: len(committed_before)] == committed_before  # nothing committed is lost
+        committed_before = names
+    assert len(committed_before) < total, "the run finished before it was killed"
+    done = subprocess.run(_index_cmd(meshes, index), capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert f"{total - len(committed_before)} meshes added" in done.stdout  # no recomputation
+    names = _rows(index)
+    assert sorted(names) == sorted(p.relative_to(meshes).as_posix() for p in meshes.rglob("*.off"))
+    with h5py.File(index, "r") as f:
+        assert np.isfinite(f["signatures"][:]).all()
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_second_writer_gets_clear_error(meshes, tmp_path):
+    index = tmp_path / "i.h5"
+    lock = open(tmp_path / "i.h5.lock", "a+")  # noqa: SIM115
+    fcntl.flock(lock, fcntl.LOCK_EX)  # as a running `cfsig index` holds it
+    try:
+        result = CliRunner().invoke(main, ["index", str(meshes), "-o", str(index)])
+    finally:
+        lock.close()
+    assert result.exit_code == 1
+    assert "another process is writing this index" in result.output
+    assert not index.exists()
+
+
+def test_reader_sees_committed_state_while_writer_commits(tmp_path):
+    from test_index import _build, _sig
+
+    from cfsig.index import Entry
+
+    index = tmp_path / "i.h5"
+    _build(index, 5)
+    with IndexReader(index) as reader:
+        with IndexWriter(index, Params()) as writer:
+            writer.add(Entry("new.off", "x", "/new.off"), _sig(50))
+            writer.commit()
+            assert len(reader) == 5  # the open reader keeps the state it opened
+            assert reader.entries([4])[0].name == "c1/4.off"
+    assert len(_rows(index)) == 6
+
+
+@pytest.mark.parametrize("kind", ["corrupt", "foreign", "newer", "params"])
+def test_unusable_index_one_line_error(meshes, tmp_path, kind):
+    from test_index import _build
+
+    index = tmp_path / "i.h5"
+    if kind == "corrupt":
+        _build(index, 3)
+        data = bytearray(index.read_bytes())
+        data[: len(data) // 2] = os.urandom(len(data) // 2)
+        index.write_bytes(bytes(data))
+    elif kind == "foreign":
+        with h5py.File(index, "w") as f:
+            f["data"] = np.arange(3)
+    else:
+        _build(index, 3, Params(seed=7) if kind == "params" else None)
+        if kind == "newer":
+            with h5py.File(index, "a") as f:
+                f.attrs["format_version"] = 2
+    mesh = next(meshes.rglob("*.off"))
+    for args in (["query", str(index), str(mesh)], ["evaluate", "--index", str(index)]):
+        result = CliRunner().invoke(main, args)
+        if kind == "params":
+            continue  # another seed is a valid index for query and evaluate
+        assert result.exit_code == 1, result.output
+        lines = result.output.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"Error: {index}")
+    if kind == "params":
+        result = CliRunner().invoke(main, ["index", str(mesh), "-o", str(index), "--seed", "0"])
+        assert result.exit_code == 1 and "other parameters" in result.output
