@@ -6,7 +6,7 @@ import json
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import fields
+from dataclasses import replace
 from pathlib import Path
 
 import click
@@ -66,10 +66,8 @@ def _with(options: list[Callable]) -> Callable:
 
 def _params(base: Params | None = None, **given: object) -> Params:
     """Parameters from the options that were given, on top of ``base`` or the defaults."""
-    values = {f.name: getattr(base or Params(), f.name) for f in fields(Params)}
-    values.update({k: v for k, v in given.items() if v is not None})
     try:
-        return Params(**values)
+        return replace(base or Params(), **{k: v for k, v in given.items() if v is not None})
     except ValueError as exc:
         raise click.BadParameter(str(exc)) from None
 
