@@ -6,13 +6,14 @@ import json
 import sys
 import time
 from collections.abc import Callable
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
 import click
 import numpy as np
 
-from . import __version__
+from . import __version__, render
 from .batch import compute_many
 from .conformal import SOLVERS
 from .errors import CfsigError
@@ -20,12 +21,14 @@ from .evaluate import evaluate_distances, labels_from_cla, read_cla
 from .index import Entry, IndexReader, IndexWriter
 from .mesh import find_meshes
 from .params import Params
+from .report import write_report
 from .search import l1_distances, search
-from .signature import signature_file
+from .signature import mesh_and_signature, signature_file
 
 EXIT_ERROR = 1
 EXIT_SKIPPED = 3
 _COMMIT_SECONDS = 30.0
+_GRID_COLUMNS = 7  # tiles per row of a single query's --png grid
 
 _params_options = [
     click.option(
@@ -109,23 +112,43 @@ def main() -> None:
     type=click.Path(file_okay=False, path_type=Path),
     help="Write DIR/<name>.npz with the signature and per-vertex phi.",
 )
-def compute(meshes, normalize, seed, bins, solver, as_json, save) -> None:
+@click.option(
+    "--png",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Draw the meshes side by side coloured by phi scaled to [0, 1].",
+)
+@click.option(
+    "--ply",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write the mesh with per-vertex colours of phi (one mesh only).",
+)
+@click.option(
+    "--hist",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Plot the signature histograms overlaid.",
+)
+def compute(meshes, normalize, seed, bins, solver, as_json, save, png, ply, hist) -> None:
     """Compute the conformal factor and signature of each mesh.
 
     \b
     Example:
       cfsig compute human/1.off hand/181.off
       cfsig compute --json --save out/ spring/261.off
+      cfsig compute hand/181.off human/1.off --png phi.png --hist hist.png
     """
+    if ply and len(meshes) > 1:
+        raise click.UsageError("--ply writes one mesh: give a single MESH")
     params = _params(normalize=normalize, seed=seed, bins=bins)
-    rows, failed = [], []
+    rows, failed, drawn = [], [], []
     for path in meshes:
         try:
-            sig = signature_file(path, params, solver)
+            mesh, sig = mesh_and_signature(path, params, solver)
         except CfsigError as exc:
             failed.append(str(exc))
             rows.append({"file": str(path), "error": str(exc)})
             continue
+        if png or ply or hist:
+            drawn.append((_short(path), mesh, sig))
         for repair in sig.repairs:
             click.echo(f"Warning: {path}: {repair}", err=True)
         row = _describe(path, sig)
@@ -147,6 +170,8 @@ def compute(meshes, normalize, seed, bins, solver, as_json, save) -> None:
             )
     if as_json:
         click.echo(json.dumps(rows, indent=2))
+    if drawn:
+        _compute_pictures(drawn, params, png, ply, hist)
     _report_errors(failed)
 
 
@@ -270,21 +295,32 @@ def _progress(iterable, total: int, what: str):
 )
 @_solver_option
 @_json_option
-def query(index_file, meshes, k, solver, as_json) -> None:
+@click.option(
+    "--png",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Draw each query and its results as framed thumbnails.",
+)
+def query(index_file, meshes, k, solver, as_json, png) -> None:
     """Find the k indexed meshes nearest to each query mesh (L1 distance).
 
-    The query signatures are computed with the index's own parameters.
+    The query signatures are computed with the index's own parameters. In the --png picture
+    a query whose folder name is a class of the index has its results framed green (same
+    class) or orange (another class).
 
     \b
     Example:
       cfsig query shrec07.h5 shrec07/ant/81.off -k 10
+      cfsig query shrec07.h5 shrec07/ant/81.off --png ant.png
     """
     try:
         with IndexReader(index_file) as reader:
             sigs = [signature_file(path, reader.params, solver).histogram for path in meshes]
             results = search(reader, np.array(sigs), k)
+            classes = set(reader.column("labels")) if png else set()
     except CfsigError as exc:
         _fail(str(exc))
+    if png:
+        _query_picture(png, meshes, results, classes)
     if as_json:
         lists = [
             [
@@ -324,8 +360,30 @@ def query(index_file, meshes, k, solver, as_json) -> None:
 @_jobs_option
 @click.option("--strict", is_flag=True, help="Stop at the first file that fails.")
 @_json_option
+@click.option(
+    "--plot",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Plot the precision/recall curves, overall and per class.",
+)
+@click.option(
+    "--report",
+    "report_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Write DIR/index.html: measures, curves and one query per class.",
+)
 def evaluate(
-    folder, classes, index_file, normalize, seed, bins, solver, jobs, strict, as_json
+    folder,
+    classes,
+    index_file,
+    normalize,
+    seed,
+    bins,
+    solver,
+    jobs,
+    strict,
+    as_json,
+    plot,
+    report_dir,
 ) -> None:
     """Retrieval measures of a labelled collection (leave-one-out).
 
@@ -337,7 +395,7 @@ def evaluate(
     Example:
       cfsig evaluate shrec07/
       cfsig evaluate shrec07/ --classes shrec07.cla --json
-      cfsig evaluate --index shrec07.h5
+      cfsig evaluate --index shrec07.h5 --plot pr.png --report report/
     """
     if (folder is None) == (index_file is None):
         raise click.UsageError("give a FOLDER or --index, not both")
@@ -350,23 +408,25 @@ def evaluate(
         if index_file:
             with IndexReader(index_file) as reader:
                 names, labels = reader.column("names"), list(reader.column("labels"))
-                hists = reader.signatures[:]
+                hists, paths = reader.signatures[:], reader.column("paths")
         else:
             params = _params(normalize=normalize, seed=seed, bins=bins)
             names, hists = _compute_folder(folder, params, solver, jobs, strict, skipped)
             labels = [Path(name).parent.name or folder.name for name in names]
+            paths = [str(folder / name) for name in names]
     except CfsigError as exc:
         _fail(str(exc))
     if cla is not None:
         labels = labels_from_cla(names, cla)
     keep = [i for i, label in enumerate(labels) if label]
+    distances = l1_distances(hists[keep], hists[keep])
     try:
-        report = evaluate_distances(
-            l1_distances(hists[keep], hists[keep]), [labels[i] for i in keep]
-        )
+        report = evaluate_distances(distances, [labels[i] for i in keep])
     except ValueError as exc:
         _fail(str(exc))
     click.echo(json.dumps(report.to_dict(), indent=2) if as_json else _format_report(report))
+    kept = [[column[i] for i in keep] for column in (names, labels, paths)]
+    _evaluate_pictures(plot, report_dir, report, kept, distances)
     _report_skipped(skipped, strict)
 
 
@@ -427,3 +487,65 @@ def demo(ctx: click.Context, out: Path) -> None:
     queries = (paths[0], paths[len(paths) // 2])
     ctx.invoke(query, index_file=index_file, meshes=queries, k=5)
     ctx.invoke(evaluate, index_file=index_file)
+
+
+def _short(path: Path) -> str:
+    """A mesh file's folder and name, e.g. ``hand/181.off``, to caption a picture."""
+    return f"{path.parent.name}/{path.name}" if path.parent.name else path.name
+
+
+@contextmanager
+def _writing_pictures():
+    """Turn failures to draw or write a picture into one error line."""
+    try:
+        yield
+    except CfsigError as exc:
+        _fail(str(exc))
+    except OSError as exc:
+        _fail(f"{exc.filename}: cannot write: {exc.strerror or exc}")
+
+
+def _warn_undrawn(problems: list[str]) -> None:
+    """One warning line per mesh file that a picture shows as a placeholder."""
+    for line in problems:
+        click.echo(f"Warning: {line}", err=True)
+
+
+def _compute_pictures(drawn: list, params: Params, png, ply, hist) -> None:
+    """The pictures of `compute`: phi on the meshes, a coloured PLY, the histograms."""
+    with _writing_pictures():
+        if png:
+            render.render_phi([(mesh, sig.phi, name) for name, mesh, sig in drawn], png)
+        if ply:
+            _, mesh, sig = drawn[0]
+            render.write_ply(mesh, sig.phi, ply)
+        if hist:
+            names = [name for name, _, _ in drawn]
+            hists = [sig.histogram for _, _, sig in drawn]
+            render.plot_histograms(hists, names, params.edges, hist)
+
+
+def _query_picture(png: Path, meshes, results, classes: set[str]) -> None:
+    """The grid of each query (one row per query, wrapped) and its results."""
+    rows = []
+    for path, hits in zip(meshes, results, strict=True):
+        label = path.parent.name if path.parent.name in classes else None
+        tiles = render.retrieval_row(
+            (str(path), _short(path), label),
+            [(h.entry.path, h.entry.name, h.entry.label, h.distance) for h in hits],
+        )
+        width = len(tiles) if len(meshes) > 1 else min(len(tiles), _GRID_COLUMNS)
+        rows += [tiles[i : i + width] for i in range(0, len(tiles), width)]
+    with _writing_pictures():
+        _warn_undrawn(render.render_grid(rows, png))
+
+
+def _evaluate_pictures(plot, report_dir, report, kept: list[list], distances) -> None:
+    """The precision/recall plot and the HTML report of `evaluate`."""
+    with _writing_pictures():
+        if plot:
+            render.plot_precision_recall(
+                report.class_precision_recall, report.precision_recall, plot
+            )
+        if report_dir:
+            _warn_undrawn(write_report(report_dir, report, *kept, distances))

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -51,12 +51,16 @@ class RetrievalReport:
         interpolated precision averaged over all evaluated queries.
     count : int
         Number of queries evaluated.
+    class_precision_recall : dict[str, np.ndarray]
+        Class name -> shape (20,): interpolated precision at recall 0.05, ..., 1.00 averaged
+        over that class's queries (the classes of ``per_class``).
     """
 
     measures: dict[str, float]
     per_class: dict[str, dict[str, float]]
     precision_recall: np.ndarray
     count: int
+    class_precision_recall: dict[str, np.ndarray] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """Return the report as plain JSON-serialisable Python.
@@ -161,12 +165,13 @@ def evaluate_distances(distances: np.ndarray, labels: Sequence[str]) -> Retrieva
     )
     if not (sizes >= 2).any():
         raise ValueError("no class has at least two members: nothing to retrieve")
-    scores, curves, per_class = [], [], {}
+    scores, curves, per_class, class_curves = [], [], {}, {}
     for code in np.flatnonzero(sizes >= 2):
         s, c = _class_scores(distances, codes, np.flatnonzero(codes == code), int(code))
         scores.append(s)
         curves.append(c)
         per_class[str(names[code])] = dict(zip(MEASURES, map(float, s.mean(axis=0)), strict=True))
+        class_curves[str(names[code])] = c.mean(axis=0)
     scores = np.concatenate(scores)
     precision = np.concatenate(curves).mean(axis=0)
     return RetrievalReport(
@@ -174,6 +179,7 @@ def evaluate_distances(distances: np.ndarray, labels: Sequence[str]) -> Retrieva
         per_class=per_class,
         precision_recall=np.column_stack([RECALL_LEVELS, precision]),
         count=len(scores),
+        class_precision_recall=class_curves,
     )
 
 

@@ -198,11 +198,41 @@ def signature_file(path: str | os.PathLike, params: Params, solver: str = "auto"
     MeshError
         The file cannot be read or gives no finite signature; the message names the file.
     """
+    return mesh_and_signature(path, params, solver)[1]
+
+
+def mesh_and_signature(
+    path: str | os.PathLike, params: Params, solver: str = "auto"
+) -> tuple[Mesh, Signature]:
+    """Read a mesh file and compute its signature, keeping the mesh (e.g. to draw phi on it).
+
+    Parameters
+    ----------
+    path : str or path-like
+        An OFF, OBJ, PLY or STL file.
+    params : Params
+        Signature parameters.
+    solver : {"auto", "scipy", "cholmod"}
+        Sparse solver backend.
+
+    Returns
+    -------
+    mesh : Mesh
+        The mesh as read and repaired; ``signature.phi`` has one value per vertex of it.
+    signature : Signature
+        As `signature_file` returns.
+
+    Raises
+    ------
+    MeshError
+        As `signature_file`.
+    """
     start = time.perf_counter()
     data = read_bytes(path)
+    mesh = parse_mesh(data, path)
     try:
-        sig = compute_signature(parse_mesh(data, path), params, solver)
+        sig = compute_signature(mesh, params, solver)
     except SolverError as exc:
         raise MeshError(f"{path}: {exc}") from None
     seconds = time.perf_counter() - start
-    return replace(sig, seconds=seconds, sha256=hashlib.sha256(data).hexdigest())
+    return mesh, replace(sig, seconds=seconds, sha256=hashlib.sha256(data).hexdigest())

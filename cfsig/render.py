@@ -1,0 +1,645 @@
+"""Pictures: meshes coloured by phi, signature histograms, precision/recall curves, result grids.
+
+Meshes are drawn by a small z-buffer rasteriser in numpy (orthographic view, per-pixel
+interpolation of the value and of the vertex normals, Lambert shading, 2x2 supersampling);
+matplotlib (Agg, imported inside the functions that need it) only lays out images, text, colour
+bars and plots and writes the PNG files. Same input, same bytes: nothing depends on the time,
+the display or the random state, and the PNG files carry no software or date metadata.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import CfsigError, MissingDependencyError
+from .mesh import Mesh, read_mesh
+
+CMAP = "turbo"
+LIGHT = np.array([-0.4, 0.5, 1.0]) / np.linalg.norm([-0.4, 0.5, 1.0])
+_AMBIENT, _DIFFUSE = 0.3, 0.7
+_CLAY = np.array([0.78, 0.76, 0.72])
+_SUPERSAMPLE = 2
+_MAX_CANDIDATES = 1 << 20  # pixel candidates per rasteriser pass, bounds the memory
+_DPI = 100
+_PANEL, _CAPTION, _COLORBAR = 480, 40, 110  # pixels of `render_phi`
+_TILE, _TILE_CAPTION, _FRAME = 160, 34, 5  # pixels of `render_grid`
+_FRAMES = {
+    "query": (0.58, 0.25, 0.75),
+    "right": (0.18, 0.66, 0.25),
+    "wrong": (1.0, 0.55, 0.0),
+    "result": (0.85, 0.85, 0.85),
+}
+_PR_PANEL = (260, 230)  # pixels of one `plot_precision_recall` panel
+_PR_COLUMNS = 5
+
+
+@dataclass(frozen=True)
+class Thumb:
+    """One tile of a result grid.
+
+    Attributes
+    ----------
+    path : str
+        The mesh file; a file that cannot be read is drawn as a placeholder.
+    caption : str
+        Text under the tile (may hold a newline).
+    role : {"query", "right", "wrong", "result"}
+        Frame colour: purple for the query, green for a result of the query's class, orange
+        for one of another class, light grey when classes are unknown.
+    """
+
+    path: str
+    caption: str
+    role: str = "result"
+
+
+def unit_interval(values: np.ndarray) -> np.ndarray:
+    """Scale values linearly to [0, 1], as the paper does for its colour coding.
+
+    Parameters
+    ----------
+    values : (n,) float
+        E.g. phi per vertex.
+
+    Returns
+    -------
+    scaled : (n,) float64
+        0 at the smallest value, 1 at the largest; all 0.5 when the values are constant.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    span = np.ptp(values)
+    return (values - values.min()) / span if span > 0 else np.full_like(values, 0.5)
+
+
+def phi_colors(phi: np.ndarray, cmap: str = CMAP) -> np.ndarray:
+    """Colour per vertex: phi normalised to [0, 1] through a colour map.
+
+    Parameters
+    ----------
+    phi : (n,) float
+        Conformal factor per vertex.
+    cmap : str
+        A matplotlib colour map; the largest phi gets its top colour, the smallest its bottom.
+
+    Returns
+    -------
+    colors : (n, 4) uint8
+        RGBA, alpha 255.
+
+    Raises
+    ------
+    MissingDependencyError
+        matplotlib is not installed.
+    """
+    rgba = _colormap(cmap)(unit_interval(phi))
+    return np.round(rgba * 255).astype(np.uint8)
+
+
+def default_view(vertices: np.ndarray) -> np.ndarray:
+    """A view that shows a shape well: along its thinnest principal axis, slightly tilted.
+
+    The longest principal axis of the vertices points up the screen, the camera looks along
+    the shortest one, then turns 20 degrees about the vertical and looks 15 degrees down.
+    Each axis's sign makes its largest coordinate positive, so a model built upright along
+    +y stays upright; the frame is right-handed, so nothing is mirrored.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+        Vertex positions.
+
+    Returns
+    -------
+    view : (3, 3) float64
+        Rotation whose rows are the screen's right, up and towards-the-viewer directions in
+        model coordinates.
+    """
+    centred = vertices - vertices.mean(axis=0)
+    _, axes = np.linalg.eigh(centred.T @ centred)  # columns by ascending variance
+    up, toward = _signed(axes[:, 2]), _signed(axes[:, 0])
+    frame = np.array([np.cross(up, toward), up, toward])
+    return _rotation(0, np.radians(15)) @ _rotation(1, np.radians(20)) @ frame
+
+
+def screen_coordinates(
+    vertices: np.ndarray, view: np.ndarray, size: tuple[int, int], margin: float = 0.06
+) -> np.ndarray:
+    """Where vertices land in an image: orthographic projection fitted to the image.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+        Vertex positions.
+    view : (3, 3) float
+        Rotation as `default_view` returns.
+    size : (int, int)
+        Image width and height in pixels.
+    margin : float
+        Empty border on each side, as a fraction of the smaller image side.
+
+    Returns
+    -------
+    points : (n, 3) float64
+        Column (x, from the left edge), row (y, from the top edge), both in pixels with pixel
+        ``(i, j)`` covering ``[j, j+1) x [i, i+1)``; and depth towards the viewer in pixels.
+    """
+    rotated = np.asarray(vertices, dtype=np.float64) @ np.asarray(view).T
+    low, high = rotated.min(axis=0), rotated.max(axis=0)
+    width, height = size
+    extent = max(high[0] - low[0], high[1] - low[1]) or 1.0
+    scale = (1 - 2 * margin) * min(width, height) / extent
+    centre = (low + high) / 2
+    return np.column_stack(
+        [
+            width / 2 + (rotated[:, 0] - centre[0]) * scale,
+            height / 2 - (rotated[:, 1] - centre[1]) * scale,
+            (rotated[:, 2] - centre[2]) * scale,
+        ]
+    )
+
+
+def shade_mesh(
+    mesh: Mesh,
+    values: np.ndarray | None = None,
+    view: np.ndarray | None = None,
+    size: tuple[int, int] = (_PANEL, _PANEL),
+    cmap: str = CMAP,
+) -> np.ndarray:
+    """Render a mesh, lit and shaded, coloured by a value per vertex or plain clay.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The mesh.
+    values : (n,) float, optional
+        Per-vertex values already in [0, 1] (see `unit_interval`), interpolated across faces
+        and mapped through ``cmap``; None draws a uniform clay colour.
+    view : (3, 3) float, optional
+        Rotation as `default_view` returns (the default).
+    size : (int, int)
+        Width and height in pixels.
+    cmap : str
+        A matplotlib colour map.
+
+    Returns
+    -------
+    image : (height, width, 4) float32
+        RGBA in [0, 1], alpha 0 outside the mesh and fractional on anti-aliased edges
+        (straight, not premultiplied, colour).
+
+    Raises
+    ------
+    MissingDependencyError
+        ``values`` is given and matplotlib is not installed.
+    """
+    view = default_view(mesh.vertices) if view is None else np.asarray(view, dtype=np.float64)
+    width, height = (s * _SUPERSAMPLE for s in size)
+    points = screen_coordinates(mesh.vertices, view, (width, height))
+    face, bary = _rasterize(points, mesh.faces, width, height)
+    covered = face >= 0
+    corners, bary = mesh.faces[face[covered]], bary[covered]
+    normals = np.einsum("kj,kjd->kd", bary, (_vertex_normals(mesh) @ view.T)[corners])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    normals *= np.where(normals[:, 2:] < 0, -1.0, 1.0)  # light both sides of open surfaces
+    light = _AMBIENT + _DIFFUSE * np.clip(normals @ LIGHT, 0, 1)
+    if values is None:
+        color = np.broadcast_to(_CLAY, (len(light), 3))
+    else:
+        value = np.einsum("kj,kj->k", bary, np.asarray(values, dtype=np.float64)[corners])
+        color = _colormap(cmap)(np.clip(value, 0, 1))[:, :3]
+    rgba = np.zeros((height * width, 4))
+    rgba[covered, :3] = color * light[:, None]
+    rgba[covered, 3] = 1.0
+    blocks = rgba.reshape(size[1], _SUPERSAMPLE, size[0], _SUPERSAMPLE, 4).mean(axis=(1, 3))
+    alpha = blocks[..., 3:]
+    blocks[..., :3] /= np.where(alpha > 0, alpha, 1.0)
+    return blocks.astype(np.float32)
+
+
+def render_phi(
+    items: Sequence[tuple[Mesh, np.ndarray, str]],
+    out: str | os.PathLike,
+    panel: int = _PANEL,
+    cmap: str = CMAP,
+) -> None:
+    """Draw meshes side by side coloured by phi, each normalised to [0, 1], with a colour bar.
+
+    The picture of the paper's Figures 1 and 2. The image is ``len(items) * panel + 110``
+    pixels wide and ``panel + 40`` high.
+
+    Parameters
+    ----------
+    items : sequence of (Mesh, (n,) float, str)
+        Each mesh, its phi per vertex and a caption.
+    out : str or path-like
+        The PNG file to write.
+    panel : int
+        Pixel size of each mesh's square panel.
+    cmap : str
+        A matplotlib colour map.
+
+    Raises
+    ------
+    MissingDependencyError
+        matplotlib is not installed.
+    """
+    width, height = len(items) * panel + _COLORBAR, panel + _CAPTION
+    fig = _figure(width, height)
+    for i, (mesh, phi, caption) in enumerate(items):
+        image = shade_mesh(mesh, unit_interval(phi), size=(panel, panel), cmap=cmap)
+        ax = fig.add_axes(_box(i * panel, _CAPTION, panel, panel, width, height))
+        ax.imshow(_on_white(image), interpolation="nearest")
+        ax.set_axis_off()
+        low, high = float(np.min(phi)), float(np.max(phi))
+        fig.text(
+            (i + 0.5) * panel / width, (_CAPTION - 2) / height,
+            f"{caption}\nphi in [{low:.3g}, {high:.3g}]", ha="center", va="top", fontsize=9,
+        )  # fmt: skip
+    bar = fig.add_axes(_box(len(items) * panel + 20, _CAPTION + panel * 0.15, 18, panel * 0.7,
+                            width, height))  # fmt: skip
+    fig.colorbar(_scalar_mappable(cmap), cax=bar, ticks=[0, 0.25, 0.5, 0.75, 1])
+    bar.set_ylabel("phi, normalised to [0, 1]", fontsize=9)
+    bar.tick_params(labelsize=8)
+    _save(fig, out)
+
+
+def write_ply(mesh: Mesh, phi: np.ndarray, out: str | os.PathLike, cmap: str = CMAP) -> None:
+    """Write a binary PLY with per-vertex colours (phi normalised to [0, 1]) and phi itself.
+
+    MeshLab and Blender show the ``red``, ``green``, ``blue``, ``alpha`` vertex colours; phi is
+    also stored as the vertex property ``quality``, which MeshLab reads as vertex quality.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The mesh, with n vertices and m faces.
+    phi : (n,) float
+        Conformal factor per vertex.
+    out : str or path-like
+        The file to write.
+    cmap : str
+        A matplotlib colour map.
+
+    Raises
+    ------
+    MissingDependencyError
+        matplotlib (for the colour map) is not installed.
+    """
+    colors = phi_colors(phi, cmap)
+    vertex = np.empty(
+        len(mesh.vertices),
+        dtype=[("xyz", "<f4", 3), ("rgba", "u1", 4), ("quality", "<f4")],
+    )
+    vertex["xyz"], vertex["rgba"], vertex["quality"] = mesh.vertices, colors, phi
+    face = np.empty(len(mesh.faces), dtype=[("n", "u1"), ("corners", "<i4", 3)])
+    face["n"], face["corners"] = 3, mesh.faces
+    header = "\n".join(
+        [
+            "ply", "format binary_little_endian 1.0",
+            f"comment cfsig: quality is phi, colours are {cmap} of phi scaled to [0, 1]",
+            f"element vertex {len(vertex)}", "property float x", "property float y",
+            "property float z", "property uchar red", "property uchar green",
+            "property uchar blue", "property uchar alpha", "property float quality",
+            f"element face {len(face)}", "property list uchar int vertex_indices", "end_header\n",
+        ]
+    )  # fmt: skip
+    with open(out, "wb") as f:
+        f.write(header.encode("ascii"))
+        f.write(vertex.tobytes())
+        f.write(face.tobytes())
+
+
+def plot_histograms(
+    histograms: Sequence[np.ndarray],
+    labels: Sequence[str],
+    edges: tuple[float, float],
+    out: str | os.PathLike,
+    size: tuple[int, int] = (800, 450),
+) -> None:
+    """Overlay signature histograms with a legend (the paper's Figures 2 and 3).
+
+    Histograms whose labels share a folder (``ant/81.off``, ``ant/82.off``) share a colour and
+    differ by line style. The phi axis spans the bins where any histogram is non-zero.
+
+    Parameters
+    ----------
+    histograms : sequence of (bins,) float
+        Signatures, each summing to 1.
+    labels : sequence of str
+        Legend entry of each.
+    edges : (float, float)
+        Outer edges of the bins (`Params.edges`), in units of phi.
+    out : str or path-like
+        The PNG file to write.
+    size : (int, int)
+        Width and height in pixels.
+
+    Raises
+    ------
+    MissingDependencyError
+        matplotlib is not installed.
+    """
+    hists = np.asarray(histograms, dtype=np.float64)
+    bin_edges = np.linspace(edges[0], edges[1], hists.shape[1] + 1)
+    used = np.flatnonzero(hists.max(axis=0) > 0)
+    first, last = max(used[0] - 2, 0), min(used[-1] + 3, hists.shape[1])
+    fig = _figure(*size)
+    ax = fig.add_axes(_box(70, 50, size[0] - 90, size[1] - 70, *size))
+    groups = list(dict.fromkeys(str(Path(label).parent) for label in labels))
+    styles = ["-", "--", ":", "-."]
+    seen: dict[str, int] = {}
+    for hist, label in zip(hists, labels, strict=True):
+        group = str(Path(label).parent)
+        style = styles[seen.get(group, 0) % len(styles)]
+        seen[group] = seen.get(group, 0) + 1
+        ax.stairs(hist[first:last], bin_edges[first : last + 1], label=label, linewidth=1.5,
+                  color=f"C{groups.index(group) % 10}", linestyle=style)  # fmt: skip
+    ax.set_xlabel("phi")
+    ax.set_ylabel("fraction of surface samples")
+    ax.set_xlim(bin_edges[first], bin_edges[last])
+    ax.set_ylim(bottom=0)
+    ax.legend(fontsize=8, ncols=1 + len(labels) // 12)
+    _save(fig, out)
+
+
+def plot_precision_recall(
+    curves: dict[str, np.ndarray],
+    overall: np.ndarray,
+    out: str | os.PathLike,
+    scores: dict[str, float] | None = None,
+) -> None:
+    """Precision/recall curves: all queries, then one small panel per class.
+
+    The first panel shows the curve over all queries in black over the class curves in grey;
+    each class panel shows its curve over the overall one (dashed). Panels are 260 x 230
+    pixels, five to a row.
+
+    Parameters
+    ----------
+    curves : dict[str, (20,) float]
+        Class name -> interpolated precision at recall 0.05, 0.10, ..., 1.00, in the order to
+        draw (e.g. `RetrievalReport.class_precision_recall`).
+    overall : (20, 2) float
+        Rows ``[recall, precision]`` over all queries (`RetrievalReport.precision_recall`).
+    out : str or path-like
+        The PNG file to write.
+    scores : dict[str, float], optional
+        A number to print in each panel's title (e.g. the mAP), keyed by class name and
+        ``"all"``.
+
+    Raises
+    ------
+    MissingDependencyError
+        matplotlib is not installed.
+    """
+    overall = np.asarray(overall, dtype=np.float64)
+    recall = overall[:, 0]
+    names = ["all", *curves]
+    rows = -(-len(names) // _PR_COLUMNS)
+    columns = min(len(names), _PR_COLUMNS)
+    fig = _figure(columns * _PR_PANEL[0], rows * _PR_PANEL[1])
+    axes = fig.subplots(rows, columns, squeeze=False, sharex=True, sharey=True)
+    for ax, name in zip(axes.flat, names, strict=False):
+        if name == "all":
+            for curve in curves.values():
+                ax.plot(recall, curve, color="0.8", linewidth=0.8)
+            ax.plot(recall, overall[:, 1], color="black", linewidth=2)
+        else:
+            ax.plot(recall, overall[:, 1], color="0.5", linestyle="--", linewidth=1)
+            ax.plot(recall, curves[name], color="C0", linewidth=2, marker=".", markersize=4)
+        score = f" (mAP {scores[name]:.2f})" if scores and name in scores else ""
+        ax.set_title(f"{name}{score}", fontsize=9)
+        ax.set_xlim(0, 1)
+        ax.set_ylim(0, 1.02)
+        ax.grid(color="0.92")
+        ax.tick_params(labelsize=7)
+    for ax in axes.flat[len(names) :]:
+        ax.set_axis_off()
+    for ax in axes[-1]:
+        ax.set_xlabel("recall", fontsize=8)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("precision", fontsize=8)
+    fig.subplots_adjust(left=0.22 / columns, right=0.98, bottom=0.2 / rows, top=1 - 0.13 / rows,
+                        wspace=0.12, hspace=0.35)  # fmt: skip
+    _save(fig, out)
+
+
+def render_grid(
+    rows: Sequence[Sequence[Thumb]], out: str | os.PathLike, tile: int = _TILE
+) -> list[str]:
+    """Draw meshes as framed, captioned clay thumbnails in a grid (the paper's Figures 8, 12).
+
+    The image is ``tile`` pixels per column (as many columns as the longest row) and
+    ``tile + 34`` per row.
+
+    Parameters
+    ----------
+    rows : sequence of sequence of Thumb
+        The tiles, row by row.
+    out : str or path-like
+        The PNG file to write.
+    tile : int
+        Pixel size of each square thumbnail.
+
+    Returns
+    -------
+    problems : list of str
+        One line ``<file>: <reason>`` for each distinct mesh that could not be drawn (missing
+        or unreadable); those tiles show a placeholder saying so.
+
+    Raises
+    ------
+    MissingDependencyError
+        matplotlib is not installed.
+    """
+    columns = max(len(row) for row in rows)
+    width, height = columns * tile, len(rows) * (tile + _TILE_CAPTION)
+    canvas = np.ones((height, width, 3))
+    meshes: dict[str, Mesh | str] = {}
+    labels = []
+    for r, row in enumerate(rows):
+        for c, thumb in enumerate(row):
+            if thumb.path not in meshes:
+                meshes[thumb.path] = _load(thumb.path)
+            top, left = r * (tile + _TILE_CAPTION), c * tile
+            cell = canvas[top : top + tile, left : left + tile]
+            mesh = meshes[thumb.path]
+            inner = tile - 2 * _FRAME
+            if isinstance(mesh, Mesh):
+                image = shade_mesh(mesh, size=(inner, inner))
+                cell[_FRAME:-_FRAME, _FRAME:-_FRAME] = _on_white(image)
+            else:
+                cell[_FRAME:-_FRAME, _FRAME:-_FRAME] = 0.93
+                labels.append((left + tile / 2, top + tile / 2, mesh.split()[0], 11, "center"))
+            _frame(cell, _FRAMES[thumb.role])
+            labels.append((left + tile / 2, top + tile + 2, thumb.caption, 7, "top"))
+    fig = _figure(width, height)
+    ax = fig.add_axes((0, 0, 1, 1))
+    ax.imshow(canvas, interpolation="nearest")
+    ax.set_axis_off()
+    for x, y, text, fontsize, va in labels:
+        fig.text(x / width, 1 - y / height, text, ha="center", va=va, fontsize=fontsize)
+    _save(fig, out)
+    return [f"{path}: {problem}" for path, problem in meshes.items() if isinstance(problem, str)]
+
+
+def retrieval_row(
+    query: tuple[str, str, str | None],
+    results: Sequence[tuple[str, str, str | None, float]],
+) -> list[Thumb]:
+    """Tiles of one query and its results, framed by whether each result is of its class.
+
+    Parameters
+    ----------
+    query : (str, str, str or None)
+        The query's mesh file, caption and class (None when unknown: no green/orange frames).
+    results : sequence of (str, str, str or None, float)
+        Each result's mesh file, name, class and distance, nearest first.
+
+    Returns
+    -------
+    thumbs : list of Thumb
+        The query tile then one per result captioned with its rank, distance and name.
+    """
+    path, caption, label = query
+    tiles = [Thumb(path, f"query\n{caption}", "query")]
+    for rank, (file, name, result_label, distance) in enumerate(results, 1):
+        role = "result" if label is None else ("right" if result_label == label else "wrong")
+        tiles.append(Thumb(file, f"{rank}: {distance:.4f}\n{name}", role))
+    return tiles
+
+
+def _signed(axis: np.ndarray) -> np.ndarray:
+    """The axis with the sign that makes its largest-magnitude coordinate positive."""
+    return axis if axis[np.argmax(np.abs(axis))] > 0 else -axis
+
+
+def _rotation(axis: int, angle: float) -> np.ndarray:
+    """Rotation by ``angle`` radians about coordinate axis 0 (x) or 1 (y)."""
+    c, s = np.cos(angle), np.sin(angle)
+    if axis == 0:
+        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def _vertex_normals(mesh: Mesh) -> np.ndarray:
+    """Area-weighted vertex normals, (n, 3), unit length (zero for isolated vertices)."""
+    corner = mesh.vertices[mesh.faces]
+    face_normals = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
+    index = mesh.faces.ravel()
+    normals = np.column_stack(
+        [np.bincount(index, np.repeat(face_normals[:, d], 3), len(mesh.vertices)) for d in range(3)]
+    )
+    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+
+
+def _rasterize(
+    points: np.ndarray, faces: np.ndarray, width: int, height: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Z-buffer: the nearest face at each pixel centre (-1 if none) and its barycentrics."""
+    face_buf = np.full(width * height, -1, dtype=np.int64)
+    depth_buf = np.full(width * height, -np.inf)
+    bary_buf = np.zeros((width * height, 3))
+    a, b, c = (points[faces[:, k]] for k in range(3))
+    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    corners = np.stack([a, b, c])
+    low = np.ceil(corners[..., :2].min(axis=0) - 0.5).astype(np.int64)
+    high = np.floor(corners[..., :2].max(axis=0) - 0.5).astype(np.int64)
+    low, high = np.maximum(low, 0), np.minimum(high, [width - 1, height - 1])
+    span = np.maximum(high - low + 1, 0)
+    counts = np.where(np.abs(det) > 1e-12, span[:, 0] * span[:, 1], 0)
+    ends = np.cumsum(counts)
+    start = 0
+    while start < len(faces):
+        base = ends[start - 1] if start else 0
+        stop = max(int(np.searchsorted(ends, base + _MAX_CANDIDATES, side="right")), start + 1)
+        ids = np.arange(start, stop)
+        n = counts[ids]
+        f = np.repeat(ids, n)
+        local = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
+        px = low[f, 0] + local % np.maximum(span[f, 0], 1)
+        py = low[f, 1] + local // np.maximum(span[f, 0], 1)
+        x, y = px + 0.5 - a[f, 0], py + 0.5 - a[f, 1]
+        b1 = (x * (c[f, 1] - a[f, 1]) - y * (c[f, 0] - a[f, 0])) / det[f]
+        b2 = ((b[f, 0] - a[f, 0]) * y - (b[f, 1] - a[f, 1]) * x) / det[f]
+        bary = np.column_stack([1 - b1 - b2, b1, b2])
+        inside = (bary >= -1e-9).all(axis=1)
+        f, bary, pixel = f[inside], bary[inside], (py * width + px)[inside]
+        depth = np.einsum("kj,jk->k", bary, corners[:, f, 2])
+        order = np.lexsort((depth, pixel))
+        last = np.append(pixel[order][1:] != pixel[order][:-1], True)
+        win = order[last]
+        nearer = depth[win] > depth_buf[pixel[win]]
+        win, target = win[nearer], pixel[win][nearer]
+        face_buf[target], depth_buf[target], bary_buf[target] = f[win], depth[win], bary[win]
+        start = stop
+    return face_buf, bary_buf
+
+
+def _load(path: str) -> Mesh | str:
+    """Read a mesh for a thumbnail, or say why not, starting with the placeholder's word."""
+    if not Path(path).is_file():
+        return "missing (no such file: moved or deleted since it was indexed?)"
+    try:
+        return read_mesh(path)
+    except CfsigError as exc:
+        return f"unreadable ({str(exc).removeprefix(f'{path}: ')})"
+
+
+def _frame(cell: np.ndarray, color: tuple[float, float, float]) -> None:
+    """Paint a border of `_FRAME` pixels around an image cell, in place."""
+    cell[:_FRAME], cell[-_FRAME:] = color, color
+    cell[:, :_FRAME], cell[:, -_FRAME:] = color, color
+
+
+def _on_white(image: np.ndarray) -> np.ndarray:
+    """Composite an RGBA image over a white background, (h, w, 3)."""
+    alpha = image[..., 3:]
+    return image[..., :3] * alpha + (1 - alpha)
+
+
+def _box(left: float, bottom: float, width: float, height: float, fig_w: int, fig_h: int):
+    """A rectangle in pixels from the bottom-left corner, as figure fractions."""
+    return (left / fig_w, bottom / fig_h, width / fig_w, height / fig_h)
+
+
+def _matplotlib():
+    """Import matplotlib's object-oriented API on the Agg canvas, or explain how to install it."""
+    try:
+        import matplotlib
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError:
+        raise MissingDependencyError(
+            "pictures need matplotlib: pip install 'cfsig[plots]'"
+        ) from None
+    return matplotlib, Figure, FigureCanvasAgg
+
+
+def _colormap(name: str):
+    """A matplotlib colour map by name."""
+    return _matplotlib()[0].colormaps[name]
+
+
+def _scalar_mappable(cmap: str):
+    """What a colour bar needs: the colour map over [0, 1]."""
+    matplotlib = _matplotlib()[0]
+    return matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0, 1), cmap)
+
+
+def _figure(width: int, height: int):
+    """An Agg figure of exactly ``width`` x ``height`` pixels, not registered with pyplot."""
+    _, figure, canvas = _matplotlib()
+    fig = figure(figsize=(width / _DPI, height / _DPI), dpi=_DPI)
+    canvas(fig)
+    return fig
+
+
+def _save(fig, out: str | os.PathLike) -> None:
+    """Write a figure as PNG without metadata that changes between runs."""
+    fig.savefig(out, format="png", dpi=_DPI, metadata={"Software": None})
