@@ -2,9 +2,10 @@
 
 Meshes are drawn by a small z-buffer rasteriser in numpy (orthographic view, per-pixel
 interpolation of the value and of the vertex normals, Lambert shading, 2x2 supersampling);
-matplotlib (Agg, imported inside the functions that need it) only lays out images, text, colour
-bars and plots and writes the PNG files. Same input, same bytes: nothing depends on the time,
-the display or the random state, and the PNG files carry no software or date metadata.
+matplotlib (Agg, imported inside the functions that need it) only lays out and draws images,
+text, colour bars and plots, and Pillow (which matplotlib installs) writes them as RGB PNG files.
+Same input, same bytes: nothing depends on the time, the display or the random state, and the
+files carry no metadata.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CfsigError, MissingDependencyError
+from .geometry import components
 from .mesh import Mesh, read_mesh
 
 CMAP = "turbo"
@@ -200,9 +202,10 @@ def shade_mesh(
     view = default_view(mesh.vertices) if view is None else np.asarray(view, dtype=np.float64)
     width, height = (s * _SUPERSAMPLE for s in size)
     points = screen_coordinates(mesh.vertices, view, (width, height))
-    face, bary = _rasterize(points, mesh.faces, width, height)
+    faces = _visible_faces(mesh, view[2])
+    face, bary = _rasterize(points, faces, width, height)
     covered = face >= 0
-    corners, bary = mesh.faces[face[covered]], bary[covered]
+    corners, bary = faces[face[covered]], bary[covered]
     normals = np.einsum("kj,kjd->kd", bary, (_vertex_normals(mesh) @ view.T)[corners])
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
     normals *= np.where(normals[:, 2:] < 0, -1.0, 1.0)  # light both sides of open surfaces
@@ -258,12 +261,12 @@ def render_phi(
         low, high = float(np.min(phi)), float(np.max(phi))
         fig.text(
             (i + 0.5) * panel / width, (_CAPTION - 2) / height,
-            f"{caption}\nphi in [{low:.3g}, {high:.3g}]", ha="center", va="top", fontsize=9,
+            f"{caption}\nφ in [{low:.3g}, {high:.3g}]", ha="center", va="top", fontsize=9,
         )  # fmt: skip
     bar = fig.add_axes(_box(len(items) * panel + 20, _CAPTION + panel * 0.15, 18, panel * 0.7,
                             width, height))  # fmt: skip
     fig.colorbar(_scalar_mappable(cmap), cax=bar, ticks=[0, 0.25, 0.5, 0.75, 1])
-    bar.set_ylabel("phi, normalised to [0, 1]", fontsize=9)
+    bar.set_ylabel("φ, scaled to [0, 1]", fontsize=9)
     bar.tick_params(labelsize=8)
     _save(fig, out)
 
@@ -323,8 +326,9 @@ def plot_histograms(
 ) -> None:
     """Overlay signature histograms with a legend (the paper's Figures 2 and 3).
 
-    Histograms whose labels share a folder (``ant/81.off``, ``ant/82.off``) share a colour and
-    differ by line style. The phi axis spans the bins where any histogram is non-zero.
+    Each histogram has its own colour; those whose labels share a folder (``ant/81.off``,
+    ``ant/82.off``) share a line style. The phi axis spans the bins where any histogram is
+    non-zero.
 
     Parameters
     ----------
@@ -352,14 +356,11 @@ def plot_histograms(
     ax = fig.add_axes(_box(70, 50, size[0] - 90, size[1] - 70, *size))
     groups = list(dict.fromkeys(str(Path(label).parent) for label in labels))
     styles = ["-", "--", ":", "-."]
-    seen: dict[str, int] = {}
-    for hist, label in zip(hists, labels, strict=True):
-        group = str(Path(label).parent)
-        style = styles[seen.get(group, 0) % len(styles)]
-        seen[group] = seen.get(group, 0) + 1
+    for i, (hist, label) in enumerate(zip(hists, labels, strict=True)):
+        style = styles[groups.index(str(Path(label).parent)) % len(styles)]
         ax.stairs(hist[first:last], bin_edges[first : last + 1], label=label, linewidth=1.5,
-                  color=f"C{groups.index(group) % 10}", linestyle=style)  # fmt: skip
-    ax.set_xlabel("phi")
+                  color=f"C{i % 10}", linestyle=style)  # fmt: skip
+    ax.set_xlabel("φ")
     ax.set_ylabel("fraction of surface samples")
     ax.set_xlim(bin_edges[first], bin_edges[last])
     ax.set_ylim(bottom=0)
@@ -538,6 +539,25 @@ def _vertex_normals(mesh: Mesh) -> np.ndarray:
     return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
 
 
+def _visible_faces(mesh: Mesh, toward: np.ndarray) -> np.ndarray:
+    """The faces that can be seen: those facing the viewer on a closed, oriented surface."""
+    faces, n = mesh.faces, len(mesh.vertices)
+    edges = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    keys = np.sort(edges[:, 0] * n + edges[:, 1])
+    # Each directed edge once and its reverse once: every edge joins two faces oriented alike.
+    if (keys[1:] == keys[:-1]).any() or not np.array_equal(
+        keys, np.sort(edges[:, 1] * n + edges[:, 0])
+    ):
+        return faces  # open, non-manifold or inconsistently oriented: the z-buffer sorts it out
+    corner = mesh.vertices[faces]
+    normals = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
+    _, labels = components(faces, n)
+    component = labels[faces[:, 0]]
+    volume = np.bincount(component, np.einsum("ij,ij->i", corner[:, 0], normals))
+    outward = np.where(volume[component] < 0, -1.0, 1.0)
+    return faces[outward * (normals @ toward) > 0]
+
+
 def _rasterize(
     points: np.ndarray, faces: np.ndarray, width: int, height: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -612,6 +632,7 @@ def _matplotlib():
     """Import matplotlib's object-oriented API on the Agg canvas, or explain how to install it."""
     try:
         import matplotlib
+        import PIL  # noqa: F401  (writes the PNG files)
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
     except ImportError:
@@ -641,5 +662,9 @@ def _figure(width: int, height: int):
 
 
 def _save(fig, out: str | os.PathLike) -> None:
-    """Write a figure as PNG without metadata that changes between runs."""
-    fig.savefig(out, format="png", dpi=_DPI, metadata={"Software": None})
+    """Write a figure as an RGB PNG (no alpha: a third smaller) with no metadata at all."""
+    from PIL import Image  # installed with matplotlib, which needs it
+
+    fig.canvas.draw()
+    rgb = np.asarray(fig.canvas.buffer_rgba())[..., :3]
+    Image.fromarray(np.ascontiguousarray(rgb)).save(out, format="png")

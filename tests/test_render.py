@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import icosphere, torus
+from conftest import icosphere, open_cylinder, random_rotation, torus
 
 from cfsig import render
 from cfsig.cli import main
@@ -98,6 +98,26 @@ def test_rendered_colour_at_the_largest_phi_is_the_top_colour():
     x, y, _ = render.screen_coordinates(v, np.eye(3), (200, 200))[middle]
     assert np.abs(image[int(y), int(x), :3] - top).max() > 0.3  # elsewhere another colour
     assert image[0, 0, 3] == 0 and image[100, 100, 3] == 1  # background clear, sphere opaque
+
+
+@pytest.mark.parametrize("shape", ["sphere", "torus", "flipped torus"])
+def test_culling_back_faces_changes_no_pixel(shape):
+    v, f = icosphere(2) if shape == "sphere" else torus(nu=24, nv=10)
+    mesh = clean_mesh(v, f[:, ::-1] if shape == "flipped torus" else f)
+    view = random_rotation(3)
+    visible = render._visible_faces(mesh, view[2])
+    assert 0.3 * len(mesh.faces) < len(visible) < 0.7 * len(mesh.faces)
+    points = render.screen_coordinates(mesh.vertices, view, (120, 120))
+    all_faces, _ = render._rasterize(points, mesh.faces, 120, 120)
+    culled, _ = render._rasterize(points, visible, 120, 120)
+    assert np.array_equal(culled >= 0, all_faces >= 0)
+    drawn = culled >= 0
+    assert np.array_equal(visible[culled[drawn]], mesh.faces[all_faces[drawn]])
+
+
+def test_open_surfaces_are_not_culled():
+    mesh = clean_mesh(*open_cylinder())
+    assert len(render._visible_faces(mesh, np.array([0.0, 0.0, 1.0]))) == len(mesh.faces)
 
 
 def test_shading_is_lit_from_the_light():
