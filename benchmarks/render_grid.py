@@ -3,11 +3,12 @@
 Usage: python benchmarks/render_grid.py [SHREC07_FOLDER] [--repeat 5]
 
 Takes the 20 SHREC 2007 meshes whose vertex counts are nearest 10,000 and times, in one run:
-reading them; `render.render_grid` (reading, the numpy z-buffer rasteriser, matplotlib layout
-and the PNG file); the same grid drawn the other way the task suggested, matplotlib
-`PolyCollection`s with faces sorted back to front (painter's algorithm); and the whole
-grid in a fresh Python process (imports included), as a command pays it. Prints a Markdown
-table of medians for docs/performance.md.
+reading them; shading their thumbnails, with and without back-face culling;
+`render.render_grid` (reading, the numpy z-buffer rasteriser, matplotlib layout and the PNG
+file); the same grid drawn the other way the task suggested, matplotlib `PolyCollection`s with
+faces sorted back to front (painter's algorithm); and the whole grid in a fresh Python process
+(imports included), as a command pays it. Prints a Markdown table of medians for
+docs/performance.md.
 """
 
 from __future__ import annotations
@@ -81,6 +82,17 @@ def painter_grid(paths: list[Path], out: Path) -> None:
     fig.savefig(out, format="png", metadata={"Software": None})
 
 
+def without_culling(meshes: list) -> None:
+    """Shade the thumbnails with every face rasterised, as for an open mesh."""
+    visible = render._visible_faces
+    render._visible_faces = lambda mesh, toward: mesh.faces
+    try:
+        for mesh in meshes:
+            render.shade_mesh(mesh, size=(TILE, TILE))
+    finally:
+        render._visible_faces = visible
+
+
 def fresh_process(paths: list[Path], out: Path) -> float:
     """Wall time of a new interpreter that imports cfsig's renderer and draws the grid."""
     code = (
@@ -118,8 +130,15 @@ def main() -> None:
     vertices = [n for _, n in chosen]
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp)
+        meshes = [read_mesh(p) for p in paths]
         results = {
             "read the 20 meshes": timed(lambda: [read_mesh(p) for p in paths], args.repeat),
+            "shade the 20 thumbnails (`shade_mesh`)": timed(
+                lambda: [render.shade_mesh(m, size=(TILE, TILE)) for m in meshes], args.repeat
+            ),
+            "the same without back-face culling": timed(
+                lambda: without_culling(meshes), args.repeat
+            ),
             "cfsig `render_grid` (z-buffer), incl. reading": timed(
                 lambda: zbuffer_grid(paths, out / "z.png"), args.repeat
             ),
