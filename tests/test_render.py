@@ -193,6 +193,16 @@ def test_grid_frames_results_and_marks_missing_files(tmp_path):
     assert np.abs(pixels[114 + 2, 2, :3] - orange).max() < 0.02  # frame of result 2
     unlabeled = render.retrieval_row((str(a), "a", None), [(str(b), "b", "ring", 0.5)])
     assert unlabeled[1].role == "result"
+    render.render_grid([row[:2], row[2:]], tmp_path / "again.png", tile=80)
+    assert (tmp_path / "g.png").read_bytes() == (tmp_path / "again.png").read_bytes()
+
+
+def test_grid_marks_unreadable_files(tmp_path):
+    bad = tmp_path / "bad.off"
+    bad.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n")
+    problems = render.render_grid([[render.Thumb(str(bad), "bad")]], tmp_path / "g.png", tile=80)
+    assert len(problems) == 1 and problems[0].startswith(f"{bad}: unreadable (")
+    _assert_picture(tmp_path / "g.png", (80, 80 + 34))
 
 
 def test_report_page(tmp_path, collection):
@@ -270,19 +280,14 @@ def test_cli_query_and_evaluate_pictures(tmp_path, collection):
     )
     assert run.exit_code == 0, run.output
     _assert_picture(tmp_path / "q.png", (4 * 160, 160 + 34))
+    two = [str(query), str(collection / "ring" / "0.off")]
     run = runner.invoke(
-        main,
-        [
-            "evaluate",
-            str(collection),
-            "-j",
-            "1",
-            "--plot",
-            str(tmp_path / "pr.png"),
-            "--report",
-            str(tmp_path / "rep"),
-        ],
+        main, ["query", str(index), *two, "-k", "2", "--png", str(tmp_path / "q2.png")]
     )
+    assert run.exit_code == 0, run.output
+    _assert_picture(tmp_path / "q2.png", (3 * 160, 2 * (160 + 34)))  # one row per query
+    pictures = ["--plot", str(tmp_path / "pr.png"), "--report", str(tmp_path / "rep")]
+    run = runner.invoke(main, ["evaluate", str(collection), "-j", "1", *pictures])
     assert run.exit_code == 0, run.output
     _assert_picture(tmp_path / "pr.png", (3 * 260, 230))
     assert (tmp_path / "rep" / "index.html").is_file()
@@ -295,6 +300,6 @@ def test_cli_query_and_evaluate_pictures(tmp_path, collection):
     warnings = [line for line in run.output.splitlines() if line.startswith("Warning")]
     assert warnings == [f"Warning: {gone}: {MISSING}"]
     run = runner.invoke(
-        main, ["query", str(index), str(query), "-k", "4", "--png", str(tmp_path / "q2.png")]
+        main, ["query", str(index), str(query), "-k", "4", "--png", str(tmp_path / "q3.png")]
     )
     assert run.exit_code == 0 and f"Warning: {gone}: missing" in run.output
