@@ -229,6 +229,17 @@ def test_missing_matplotlib_is_a_typed_error(monkeypatch, tmp_path):
         render.plot_histograms([np.ones(4) / 4], ["a"], (0, 1), tmp_path / "h.png")
 
 
+def test_cli_without_matplotlib_says_how_to_install(monkeypatch, tmp_path, collection):
+    for name in ("matplotlib", "matplotlib.figure", "matplotlib.backends.backend_agg"):
+        monkeypatch.setitem(sys.modules, name, None)
+    mesh = str(collection / "long" / "0.off")
+    run = CliRunner().invoke(main, ["compute", mesh, "--hist", str(tmp_path / "h.png")])
+    assert run.exit_code == 1
+    assert (
+        run.output.splitlines()[-1] == "Error: pictures need matplotlib: pip install 'cfsig[plots]'"
+    )
+
+
 def test_cli_imports_no_matplotlib():
     code = "import sys, cfsig.cli; print('matplotlib' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
