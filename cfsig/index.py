@@ -19,6 +19,7 @@ import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import h5py
 import numpy as np
@@ -26,7 +27,9 @@ import numpy as np
 from . import __version__
 from .errors import IndexFileError
 from .params import Params
-from .signature import Signature
+
+if TYPE_CHECKING:  # importing the signature code would load scipy on the query path
+    from .signature import Signature
 
 FORMAT = "cfsig-index"
 FORMAT_VERSION = 1

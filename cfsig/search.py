@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
+import os
+import threading
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
+from .blocks import Block, plan_blocks, read_block
 from .index import Entry, IndexReader
+from .l1 import choose_kernel
 
-_BLOCK_ROWS = 16384
+_BLOCK_ROWS = 16384  # rows per block of a dataset that is not chunked
+_OUT_CELLS = 1 << 20  # distances computed per kernel call (4 MB): bounds memory for many queries
 
 
 @dataclass(frozen=True)
@@ -43,20 +50,19 @@ def l1_distances(queries: np.ndarray, signatures: np.ndarray) -> np.ndarray:
     Returns
     -------
     distances : (q, N) float64
-        Between 0 and 2 for histograms that sum to 1.
+        Between 0 and 2 for histograms that sum to 1; computed in float32 like `nearest`.
     """
-    signatures = np.asarray(signatures, dtype=np.float32)
-    out = np.empty((len(queries), len(signatures)))
-    for i, query in enumerate(np.asarray(queries, dtype=np.float32)):
-        out[i] = np.abs(signatures - query).sum(axis=1, dtype=np.float64)
-    return out
+    queries, signatures = _float32(queries), _float32(signatures)
+    out = np.empty((len(queries), len(signatures)), np.float32)
+    choose_kernel(out.size)(queries, signatures, out)
+    return out.astype(np.float64)
 
 
 def nearest(reader: IndexReader, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """The k nearest indexed signatures of each query, streaming the index in blocks.
 
-    Memory stays bounded by one block of rows whatever the index size; all queries share one
-    pass over the file.
+    All queries share one pass over the file, made by one thread per core; memory stays bounded
+    by a few blocks of rows whatever the index size.
 
     Parameters
     ----------
@@ -72,23 +78,37 @@ def nearest(reader: IndexReader, queries: np.ndarray, k: int) -> tuple[np.ndarra
     rows : (q, min(k, N)) int64
         Row numbers of the results, nearest first, ties broken by row number.
     distances : (q, min(k, N)) float64
-        Their L1 distances.
+        Their L1 distances, accumulated in float32.
     """
-    queries = np.atleast_2d(queries)
-    k = min(k, len(reader))
-    rows = np.empty((len(queries), 0), dtype=np.int64)
-    dist = np.empty((len(queries), 0))
-    for start in range(0, len(reader), _BLOCK_ROWS):
-        block = reader.signatures[start : start + _BLOCK_ROWS]
-        block_rows = np.arange(start, start + len(block))
-        dist = np.hstack([dist, l1_distances(queries, block)])
-        rows = np.hstack([rows, np.broadcast_to(block_rows, (len(queries), len(block)))])
-        if dist.shape[1] > k:
-            keep = np.argpartition(dist, k - 1, axis=1)[:, :k]
-            dist = np.take_along_axis(dist, keep, axis=1)
-            rows = np.take_along_axis(rows, keep, axis=1)
-    order = np.lexsort((rows, dist), axis=-1)
-    return np.take_along_axis(rows, order, axis=1), np.take_along_axis(dist, order, axis=1)
+    queries = _float32(np.atleast_2d(queries))
+    n = len(reader)
+    best = _Best(len(queries), max(min(k, n), 0), n)
+    if best.k == 0 or len(queries) == 0:
+        return best.result()
+    blocks = plan_blocks(reader.signatures, _BLOCK_ROWS)
+    kernel = choose_kernel(len(queries) * n)
+    todo = iter(blocks)
+    lock = threading.Lock()
+
+    def work() -> None:
+        block_rows = max(b.stop - b.start for b in blocks)
+        buffer = np.empty((block_rows, queries.shape[1]), np.float32)
+        group = max(1, _OUT_CELLS // block_rows)
+        out = np.empty((min(group, len(queries)), block_rows), np.float32)
+        while (block := _next(todo, lock)) is not None:
+            rows = read_block(reader.signatures, block, buffer)
+            for q0 in range(0, len(queries), group):
+                dist = out[: len(queries[q0 : q0 + group]), : len(rows)]
+                kernel(queries[q0 : q0 + group], rows, dist)
+                with lock:
+                    best.merge(q0, block.start, dist)
+            del rows  # unmaps a mapped block
+
+    threads = min(_threads(), len(blocks))
+    with ThreadPoolExecutor(threads) as pool:
+        for done in [pool.submit(work) for _ in range(threads)]:
+            done.result()
+    return best.result()
 
 
 def search(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[Hit]]:
@@ -112,3 +132,47 @@ def search(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[H
     entries = reader.entries(rows.ravel()) if rows.size else []
     it = iter(entries)
     return [[Hit(rank + 1, float(d), next(it)) for rank, d in enumerate(row)] for row in dists]
+
+
+class _Best:
+    """The k smallest distances seen so far for each query, ties broken by row number."""
+
+    def __init__(self, n_queries: int, k: int, n_rows: int) -> None:
+        self.k = k
+        # NaN sorts after every distance, and the row number n after every row: the placeholders
+        # are the first to go, and every row is a candidate until k are held.
+        self.dist = np.full((n_queries, k), np.nan, np.float32)
+        self.rows = np.full((n_queries, k), n_rows, np.int64)
+
+    def merge(self, first_query: int, first_row: int, dist: np.ndarray) -> None:
+        """Take in distances (q, m) from queries ``first_query...`` to rows ``first_row...``."""
+        held = slice(first_query, first_query + len(dist))
+        candidates = ~(dist > self.dist[held, -1:])  # also true for NaN
+        for j in np.flatnonzero(candidates.any(axis=1)):
+            new = np.flatnonzero(candidates[j])
+            d = np.concatenate([self.dist[first_query + j], dist[j, new]])
+            r = np.concatenate([self.rows[first_query + j], new + first_row])
+            keep = np.lexsort((r, d))[: self.k]
+            self.dist[first_query + j], self.rows[first_query + j] = d[keep], r[keep]
+
+    def result(self) -> tuple[np.ndarray, np.ndarray]:
+        """Rows and distances, nearest first."""
+        return self.rows.copy(), self.dist.astype(np.float64)
+
+
+def _next(blocks: Iterator[Block], lock: threading.Lock) -> Block | None:
+    """The next block to scan, shared by the threads."""
+    with lock:
+        return next(blocks, None)
+
+
+def _threads() -> int:
+    """Number of cores this process may run on."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+def _float32(a: np.ndarray) -> np.ndarray:
+    """A C-contiguous float32 copy or view."""
+    return np.ascontiguousarray(a, dtype=np.float32)

@@ -74,9 +74,9 @@ def test_bad_index_files(tmp_path, kind):
 
 
 def test_nearest_matches_brute_force(tmp_path, monkeypatch):
-    import cfsig.search
+    import cfsig.index
 
-    monkeypatch.setattr(cfsig.search, "_BLOCK_ROWS", 7)  # several blocks
+    monkeypatch.setattr(cfsig.index, "_CHUNK_ROWS", 7)  # several blocks
     hists = np.array(_build(tmp_path / "i.h5", 30))
     queries = np.array([_sig(100).histogram, _sig(101).histogram])
     with IndexReader(tmp_path / "i.h5") as r:

@@ -1,0 +1,184 @@
+import h5py
+import numpy as np
+import pytest
+
+import cfsig.index
+import cfsig.l1
+import cfsig.search
+from cfsig.blocks import plan_blocks, read_block
+from cfsig.index import Entry, IndexReader, IndexWriter
+from cfsig.l1 import choose_kernel, l1_numpy, numba_kernel
+from cfsig.params import Params
+from cfsig.search import nearest, search
+from cfsig.signature import Signature
+
+KERNELS = ["numpy", "numba"]
+
+
+def _histograms(n, seed, bins=200):
+    h = np.random.default_rng(seed).random((n, bins))
+    return (h / h.sum(axis=1, keepdims=True)).astype(np.float32)
+
+
+def _brute(queries, rows):
+    """L1 distances in float64, independently of the kernels."""
+    q, r = np.asarray(queries, np.float32), np.asarray(rows, np.float32)
+    return np.abs(q[:, None, :].astype(np.float64) - r[None, :, :]).sum(axis=2)
+
+
+def _brute_nearest(queries, rows, k):
+    """Row numbers of the k nearest, ties broken by row number."""
+    d = _brute(queries, rows)
+    order = np.lexsort((np.broadcast_to(np.arange(d.shape[1]), d.shape), d), axis=1)[:, :k]
+    return order, np.take_along_axis(d, order, axis=1)
+
+
+def _build(path, hists, chunk_rows, monkeypatch):
+    monkeypatch.setattr(cfsig.index, "_CHUNK_ROWS", chunk_rows)
+    phi = np.zeros(1)
+    with IndexWriter(path, Params()) as w:
+        for i, h in enumerate(hists):
+            sig = Signature(h, phi, 3, 1, 1, 0.0, (), 0.0, f"{i:064d}")
+            w.add(Entry(f"m{i}.off", f"c{i % 4}", f"/d/m{i}.off"), sig)
+
+
+@pytest.fixture(params=KERNELS)
+def kernel(request, monkeypatch):
+    """Force one kernel on every scan."""
+    if request.param == "numba":
+        pytest.importorskip("numba")
+        monkeypatch.setattr(cfsig.l1, "NUMBA_MIN_WORK", 0)
+    else:
+        monkeypatch.setattr(cfsig.l1, "numba_kernel", lambda: None)
+    return request.param
+
+
+@pytest.mark.parametrize("n_queries", [1, 3, 17])
+@pytest.mark.parametrize("n_rows", [1, 255, 256, 257, 700])
+def test_kernels_match_brute_force(n_queries, n_rows):
+    queries, rows = _histograms(n_queries, 1), _histograms(n_rows, 2)
+    kernels = [l1_numpy] + ([numba_kernel()] if numba_kernel() else [])
+    for kernel in kernels:
+        out = np.full((n_queries, n_rows), -1.0, np.float32)
+        kernel(queries, rows, out)
+        assert np.allclose(out, _brute(queries, rows), rtol=0, atol=2e-6)
+
+
+def test_kernel_choice(monkeypatch):
+    assert choose_kernel(10) is l1_numpy
+    monkeypatch.setattr(cfsig.l1, "numba_kernel", lambda: None)
+    assert choose_kernel(10**12) is l1_numpy  # fallback when numba is missing
+
+
+@pytest.mark.parametrize("k", [1, 5, 23, 60, 80])
+@pytest.mark.parametrize("n_queries", [1, 4])
+def test_nearest_matches_brute_force(tmp_path, monkeypatch, kernel, k, n_queries):
+    hists = _histograms(60, 3)
+    _build(tmp_path / "i.h5", hists, 7, monkeypatch)  # 9 chunks, the last one partial
+    queries = _histograms(n_queries, 4)
+    with IndexReader(tmp_path / "i.h5") as r:
+        rows, dist = nearest(r, queries, k)
+    want_rows, want_dist = _brute_nearest(queries, hists, k)
+    assert rows.shape == dist.shape == (n_queries, min(k, 60))
+    assert rows.dtype == np.int64 and dist.dtype == np.float64
+    assert np.array_equal(rows, want_rows)
+    assert np.allclose(dist, want_dist, rtol=0, atol=2e-6)
+
+
+@pytest.mark.parametrize("threads", [1, 2, 5])
+def test_ties_broken_by_row_whatever_the_block_order(tmp_path, monkeypatch, kernel, threads):
+    hists = _histograms(50, 5)
+    twin = hists[20].copy()
+    for row in (3, 10, 17, 40, 41):  # in four different chunks of 7 rows
+        hists[row] = twin
+    _build(tmp_path / "i.h5", hists, 7, monkeypatch)
+    monkeypatch.setattr(cfsig.search, "_threads", lambda: threads)
+    with IndexReader(tmp_path / "i.h5") as r:
+        rows, dist = nearest(r, np.stack([twin, hists[0]]), 8)
+    assert list(rows[0, :6]) == [3, 10, 17, 20, 40, 41]
+    assert np.all(dist[0, :6] == 0)
+    near_twins = [i for i in rows[1] if i in (3, 10, 17, 20, 40, 41)]
+    assert near_twins == sorted(near_twins)  # equal distances, in row order
+    assert np.array_equal(rows[1], _brute_nearest(hists[:1], hists, 8)[0][0])
+
+
+def test_many_queries_in_small_groups(tmp_path, monkeypatch, kernel):
+    hists, queries = _histograms(40, 6), _histograms(30, 7)
+    _build(tmp_path / "i.h5", hists, 16, monkeypatch)
+    monkeypatch.setattr(cfsig.search, "_OUT_CELLS", 40)  # 2 queries per kernel call
+    with IndexReader(tmp_path / "i.h5") as r:
+        rows, dist = nearest(r, queries, 5)
+    want_rows, want_dist = _brute_nearest(queries, hists, 5)
+    assert np.array_equal(rows, want_rows)
+    assert np.allclose(dist, want_dist, rtol=0, atol=2e-6)
+
+
+def _relayout(path, **create):
+    """Rewrite the signatures dataset of an index with another HDF5 layout."""
+    with h5py.File(path, "a") as f:
+        data = f["signatures"][:]
+        del f["signatures"]
+        f.create_dataset("signatures", data=data, **create)
+
+
+LAYOUTS = {
+    "chunked": None,
+    "contiguous": {},
+    "gzip": {"chunks": (8, 200), "compression": "gzip"},
+    "chunks across columns": {"chunks": (8, 50)},
+    "float64": {"dtype": np.float64},
+    "big-endian": {"dtype": ">f4"},
+}
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+def test_every_layout_gives_the_same_result(tmp_path, monkeypatch, layout):
+    hists = _histograms(45, 8)
+    path = tmp_path / "i.h5"
+    _build(path, hists, 7, monkeypatch)
+    if LAYOUTS[layout] is not None:
+        _relayout(path, **LAYOUTS[layout])
+    monkeypatch.setattr(cfsig.search, "_BLOCK_ROWS", 10)
+    with IndexReader(path) as r:
+        blocks = plan_blocks(r.signatures, 10)
+        buffer = np.empty((10, 200), np.float32)
+        parts = [read_block(r.signatures, b, buffer).copy() for b in blocks]
+        rows, _ = nearest(r, hists[:2], 6)
+    mapped = [b.offset is not None for b in blocks]
+    assert all(mapped) if layout in ("chunked", "contiguous") else not any(mapped)
+    assert np.array_equal(np.concatenate(parts), hists)
+    assert np.array_equal(rows, _brute_nearest(hists[:2], hists, 6)[0])
+
+
+def test_unwritten_chunks_are_read_through_hdf5(tmp_path):
+    path = tmp_path / "sparse.h5"
+    with h5py.File(path, "w") as f:
+        d = f.create_dataset("s", (30, 4), np.float32, chunks=(8, 4))
+        d[8:16] = 1.0
+        d[24:30] = 2.0
+    with h5py.File(path, "r") as f:
+        blocks = plan_blocks(f["s"], 100)
+        buffer = np.empty((8, 4), np.float32)
+        parts = [read_block(f["s"], b, buffer).copy() for b in blocks]
+        assert [b.offset is not None for b in blocks] == [False, True, False, True]
+        assert np.array_equal(np.concatenate(parts), f["s"][:])
+
+
+def test_empty_index_and_k_zero(tmp_path):
+    path = tmp_path / "i.h5"
+    with IndexWriter(path, Params()):
+        pass
+    with IndexReader(path) as r:
+        rows, dist = nearest(r, _histograms(2, 9), 5)
+        assert rows.shape == dist.shape == (2, 0)
+        assert search(r, _histograms(1, 9), 5) == [[]]
+
+
+def test_nan_rows_rank_last(tmp_path, monkeypatch):
+    hists = _histograms(10, 10)
+    hists[2] = np.nan
+    _build(tmp_path / "i.h5", hists, 4, monkeypatch)
+    with IndexReader(tmp_path / "i.h5") as r:
+        rows, dist = nearest(r, hists[:1], 10)
+    assert rows[0, -1] == 2 and np.isnan(dist[0, -1])
+    assert np.array_equal(rows, _brute_nearest(hists[:1], hists, 10)[0])
