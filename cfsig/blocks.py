@@ -37,26 +37,28 @@ class Block:
 
 
 def plan_blocks(dataset: h5py.Dataset, rows_per_block: int) -> list[Block]:
-    """Split a dataset's rows into blocks, one per chunk for a chunked dataset.
+    """Split a dataset's rows into blocks: one per chunk where chunks can be mapped.
 
     Parameters
     ----------
     dataset : h5py.Dataset
         A 2-D dataset of shape (N, bins).
     rows_per_block : int
-        Rows per block when the dataset is not chunked.
+        Rows per block when the rows cannot be mapped chunk by chunk (rounded up to whole
+        chunks) or the dataset is contiguous.
 
     Returns
     -------
     blocks : list of Block
         Covering rows 0 to N in order.
     """
-    n = dataset.shape[0]
+    n, mappable = dataset.shape[0], _mappable(dataset)
+    if dataset.chunks is not None and mappable:
+        step, offsets = dataset.chunks[0], _chunk_offsets(dataset)
+        return [Block(s, min(s + step, n), offsets.get(s)) for s in range(0, n, step)]
+    base = dataset.id.get_offset() if mappable else None
     if dataset.chunks is not None:
-        step = dataset.chunks[0]
-        mapped = _chunk_offsets(dataset) if _mappable(dataset) else {}
-        return [Block(s, min(s + step, n), mapped.get(s)) for s in range(0, n, step)]
-    base = dataset.id.get_offset() if _mappable(dataset) else None
+        rows_per_block = -(-rows_per_block // dataset.chunks[0]) * dataset.chunks[0]
     row_bytes = dataset.shape[1] * _FLOAT32.itemsize
     return [
         Block(s, min(s + rows_per_block, n), None if base is None else base + s * row_bytes)

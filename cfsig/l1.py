@@ -2,9 +2,9 @@
 
 Two implementations fill the same output. The numpy one works everywhere and reads the block
 once per query in cache-sized pieces. The numba one (optional extra ``cfsig[fast]``) makes one
-pass over the block for all queries, about 8 times less work for a batch of queries, but importing
-numba and loading its compiled kernel costs about a second and 130 MB resident: it is used only
-when installed and the batch is large enough to repay that (`docs/performance.md`).
+pass over the block for all queries, several times faster, but importing numba and loading its
+compiled kernel takes over half a second and over 100 MB resident: it is used only when installed
+and the scan is large enough to repay that (measured in `docs/query-options.md`).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 Kernel = Callable[[np.ndarray, np.ndarray, np.ndarray], None]
 
 _PIECE_ROWS = 256  # 200 KB of float32 rows at 200 bins: stays in the L2 cache between passes
-NUMBA_MIN_WORK = 50_000_000  # query-row pairs; numpy takes about 1 s for this many
+NUMBA_MIN_WORK = 4_000_000  # query-row pairs: where numba's saving passes its loading time
 
 
 def l1_numpy(queries: np.ndarray, rows: np.ndarray, out: np.ndarray) -> None:
@@ -32,14 +32,16 @@ def l1_numpy(queries: np.ndarray, rows: np.ndarray, out: np.ndarray) -> None:
     out : (q, m) float32
         Filled with ``out[j, i] = sum_b |rows[i, b] - queries[j, b]|``.
     """
-    diff = np.empty((min(_PIECE_ROWS, len(rows)), rows.shape[1]), np.float32)
-    for start in range(0, len(rows), _PIECE_ROWS):
-        piece = rows[start : start + _PIECE_ROWS]
-        scratch = diff[: len(piece)]
-        for query, dist in zip(queries, out[:, start : start + len(piece)], strict=True):
-            np.subtract(piece, query, out=scratch)
+    piece_rows = min(_PIECE_ROWS, len(rows))
+    diff = np.empty((piece_rows, rows.shape[1]), np.float32)
+    for query, dist in zip(queries, out, strict=True):
+        tiled = np.tile(query, (piece_rows, 1))  # a same-shape operand: no broadcasting per row
+        for start in range(0, len(rows), piece_rows):
+            piece = rows[start : start + piece_rows]
+            scratch = diff[: len(piece)]
+            np.subtract(piece, tiled[: len(piece)], out=scratch)
             np.abs(scratch, out=scratch)
-            np.einsum("ij->i", scratch, out=dist)
+            np.einsum("ij->i", scratch, out=dist[start : start + len(piece)])
 
 
 def numba_kernel() -> Kernel | None:

@@ -141,13 +141,27 @@ def test_every_layout_gives_the_same_result(tmp_path, monkeypatch, layout):
     monkeypatch.setattr(cfsig.search, "_BLOCK_ROWS", 10)
     with IndexReader(path) as r:
         blocks = plan_blocks(r.signatures, 10)
-        buffer = np.empty((10, 200), np.float32)
+        buffer = np.empty((max(b.stop - b.start for b in blocks), 200), np.float32)
         parts = [read_block(r.signatures, b, buffer).copy() for b in blocks]
         rows, _ = nearest(r, hists[:2], 6)
     mapped = [b.offset is not None for b in blocks]
     assert all(mapped) if layout in ("chunked", "contiguous") else not any(mapped)
+    assert all(b.stop - b.start <= 16 for b in blocks)
     assert np.array_equal(np.concatenate(parts), hists)
     assert np.array_equal(rows, _brute_nearest(hists[:2], hists, 6)[0])
+
+
+def test_small_unmappable_chunks_are_read_many_at_a_time(tmp_path):
+    path = tmp_path / "small-chunks.h5"
+    data = _histograms(1000, 11)
+    with h5py.File(path, "w") as f:
+        f.create_dataset("s", data=data, chunks=(3, 200), compression="gzip")
+    with h5py.File(path, "r") as f:
+        blocks = plan_blocks(f["s"], 100)
+        buffer = np.empty((102, 200), np.float32)
+        parts = [read_block(f["s"], b, buffer).copy() for b in blocks]
+    assert [b.stop - b.start for b in blocks[:2]] == [102, 102] and len(blocks) == 10
+    assert np.array_equal(np.concatenate(parts), data)
 
 
 def test_unwritten_chunks_are_read_through_hdf5(tmp_path):
