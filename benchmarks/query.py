@@ -200,7 +200,14 @@ def report(rows: list[dict], build_s: dict, fresh: float, load: tuple, command: 
             f"{ms(r['open'])} | {ms(r['names'])} | {r['peak_mb']:.0f} MB | {r['ratio']} | "
             f"{r['kernel']} |"
         )
+    one = next(r for r in reversed(rows) if r["case"] == "1 query + names, cfsig")
     lines += [
+        "",
+        f"Against the targets of issue 4, at {one['n']:,} entries: one query took "
+        f"{ms(one['wall'])} wall and {ms(one['cpu'])} of CPU over both threads (target 0.2 s), "
+        f"with {one['peak_mb']:.0f} MB peak (target 200 MB); opening the index took "
+        f"{ms(one['open'])} and reading the top 20 names {ms(one['names'])} (target together "
+        "0.1 s). With the load above, the wall time is the least reliable of these figures.",
         "",
         "Building the indexes took "
         + ", ".join(f"{s:.0f} s at {n:,}" for n, s in build_s.items())
