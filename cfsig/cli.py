@@ -7,7 +7,7 @@ import sys
 import time
 from collections.abc import Callable
 from contextlib import contextmanager
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import click
@@ -20,7 +20,7 @@ from .errors import CfsigError
 from .evaluate import evaluate_distances, labels_from_cla, read_cla
 from .index import Entry, IndexReader, IndexWriter
 from .mesh import find_meshes
-from .params import Params
+from .params import DESCRIPTORS, Params
 from .report import write_report
 from .search import l1_distances, search
 from .signature import mesh_and_signature, signature_file
@@ -39,6 +39,13 @@ _params_options = [
     click.option("--seed", type=int, default=None, help="Seed of the surface sampling [0]."),
     click.option("--bins", type=int, default=None, help="Histogram bins [200]."),
 ]
+_descriptor_option = click.option(
+    "--descriptor",
+    type=click.Choice(DESCRIPTORS),
+    default=None,
+    help="What to compute: the paper's histogram (cf) or phi, spectrum and heat kernel "
+    "signature (cfhks) [cf; an existing index keeps its own].",
+)
 _solver_option = click.option(
     "--solver",
     type=click.Choice(SOLVERS),
@@ -105,6 +112,7 @@ def main() -> None:
 @main.command()
 @click.argument("meshes", nargs=-1, required=True, type=click.Path(path_type=Path))
 @_with(_params_options)
+@_descriptor_option
 @_solver_option
 @_json_option
 @click.option(
@@ -127,7 +135,9 @@ def main() -> None:
     type=click.Path(dir_okay=False, path_type=Path),
     help="Plot the signature histograms overlaid.",
 )
-def compute(meshes, normalize, seed, bins, solver, as_json, save, png, ply, hist) -> None:
+def compute(
+    meshes, normalize, seed, bins, descriptor, solver, as_json, save, png, ply, hist
+) -> None:
     """Compute the conformal factor and signature of each mesh.
 
     \b
@@ -138,7 +148,9 @@ def compute(meshes, normalize, seed, bins, solver, as_json, save, png, ply, hist
     """
     if ply and len(meshes) > 1:
         raise click.UsageError("--ply writes one mesh: give a single MESH")
-    params = _params(normalize=normalize, seed=seed, bins=bins)
+    params = _params(normalize=normalize, seed=seed, bins=bins, descriptor=descriptor)
+    if hist and params.descriptor != "cf":
+        raise click.UsageError("--hist plots the histograms of the cf descriptor")
     rows, failed, drawn = [], [], []
     for path in meshes:
         try:
@@ -209,6 +221,7 @@ def _report_errors(errors: list[str]) -> None:
     help="The index file (HDF5); created, or updated with new and changed meshes.",
 )
 @_with(_params_options)
+@_descriptor_option
 @_solver_option
 @_jobs_option
 @click.option("--strict", is_flag=True, help="Stop at the first file that fails.")
@@ -219,7 +232,9 @@ def _report_errors(errors: list[str]) -> None:
     show_default=True,
     help="Commit to the index file after this many meshes (and every 30 s).",
 )
-def index(paths, output, normalize, seed, bins, solver, jobs, strict, commit_every) -> None:
+def index(
+    paths, output, normalize, seed, bins, descriptor, solver, jobs, strict, commit_every
+) -> None:
     """Index mesh files and folders (recursively: OFF, OBJ, PLY, STL) into an HDF5 file.
 
     Each mesh is stored under its path relative to the folder given, labelled with the name of
@@ -237,7 +252,7 @@ def index(paths, output, normalize, seed, bins, solver, jobs, strict, commit_eve
         if output.exists():
             with IndexReader(output) as reader:
                 base = reader.params
-        params = _params(base, normalize=normalize, seed=seed, bins=bins)
+        params = _params(base, normalize=normalize, seed=seed, bins=bins, descriptor=descriptor)
         with IndexWriter(output, params) as writer:
             added, skipped = _index_into(writer, paths, solver, jobs, strict, commit_every)
     except CfsigError as exc:
@@ -355,6 +370,12 @@ def query(index_file, meshes, k, solver, as_json, png) -> None:
     type=click.Path(dir_okay=False, path_type=Path),
     help="Evaluate the signatures of an index instead of computing them.",
 )
+@click.option(
+    "--descriptor",
+    "descriptors",
+    help=f"Descriptors to compare side by side, comma-separated ({', '.join(DESCRIPTORS)}) "
+    "[cf; with --index, the index's own].",
+)
 @_with(_params_options)
 @_solver_option
 @_jobs_option
@@ -375,6 +396,7 @@ def evaluate(
     folder,
     classes,
     index_file,
+    descriptors,
     normalize,
     seed,
     bins,
@@ -389,16 +411,24 @@ def evaluate(
 
     Each subfolder of FOLDER is a class (or --classes maps file ids to classes). Prints the
     Princeton Shape Benchmark / SHREC measures NN, FT, ST, E, DCG and mAP, overall and per
-    class, and the precision/recall curve.
+    class, the precision/recall curve and the median seconds per mesh (reading included).
+    With several descriptors, prints them side by side on the meshes that all of them could
+    compute: the measures, the first tier (FT) per class and the seconds per mesh.
 
     \b
     Example:
       cfsig evaluate shrec07/
+      cfsig evaluate shrec07/ --descriptor cf,cfhks
       cfsig evaluate shrec07/ --classes shrec07.cla --json
       cfsig evaluate --index shrec07.h5 --plot pr.png --report report/
     """
     if (folder is None) == (index_file is None):
         raise click.UsageError("give a FOLDER or --index, not both")
+    if index_file and descriptors:
+        raise click.UsageError("--descriptor is for a FOLDER: an index holds one descriptor")
+    wanted = _descriptor_list(descriptors)
+    if len(wanted) > 1 and (plot or report_dir):
+        raise click.UsageError("--plot and --report take one descriptor")
     try:
         cla = read_cla(classes) if classes else None
     except (OSError, ValueError) as exc:
@@ -406,46 +436,111 @@ def evaluate(
     skipped: list[str] = []
     try:
         if index_file:
-            with IndexReader(index_file) as reader:
-                names, labels = reader.column("names"), list(reader.column("labels"))
-                hists, paths = reader.signatures[:], reader.column("paths")
+            runs = dict([_index_run(index_file)])
         else:
-            params = _params(normalize=normalize, seed=seed, bins=bins)
-            names, hists = _compute_folder(folder, params, solver, jobs, strict, skipped)
-            labels = [Path(name).parent.name or folder.name for name in names]
-            paths = [str(folder / name) for name in names]
+            runs = {}
+            for name in wanted:
+                params = _params(normalize=normalize, seed=seed, bins=bins, descriptor=name)
+                runs[name] = _compute_folder(folder, params, solver, jobs, strict, skipped)
     except CfsigError as exc:
         _fail(str(exc))
-    if cla is not None:
-        labels = labels_from_cla(names, cla)
-    keep = [i for i, label in enumerate(labels) if label]
-    distances = l1_distances(hists[keep], hists[keep])
-    try:
-        report = evaluate_distances(distances, [labels[i] for i in keep])
-    except ValueError as exc:
-        _fail(str(exc))
-    click.echo(json.dumps(report.to_dict(), indent=2) if as_json else _format_report(report))
-    kept = [[column[i] for i in keep] for column in (names, labels, paths)]
-    _evaluate_pictures(plot, report_dir, report, kept, distances)
+    common = set.intersection(*(set(run.names) for run in runs.values()))
+    reports, seconds = {}, {}
+    for name, run in runs.items():
+        labels = labels_from_cla(run.names, cla) if cla is not None else run.labels
+        pairs = enumerate(zip(run.names, labels, strict=True))
+        keep = [i for i, (n, label) in pairs if n in common and label]
+        distances = l1_distances(run.signatures[keep], run.signatures[keep])
+        try:
+            reports[name] = evaluate_distances(distances, [labels[i] for i in keep])
+        except ValueError as exc:
+            _fail(str(exc))
+        seconds[name] = float(np.median(run.seconds)) if len(run.seconds) else None
+    if len(runs) == 1:
+        ((name, report),) = reports.items()
+        click.echo(json.dumps(report.to_dict(), indent=2) if as_json else _format_report(report))
+        if seconds[name] is not None and not as_json:
+            click.echo(f"median seconds per mesh: {seconds[name]:.3f}")
+        kept = [[column[i] for i in keep] for column in (run.names, labels, run.paths)]
+        _evaluate_pictures(plot, report_dir, report, kept, distances)
+    elif as_json:
+        out = {n: {**r.to_dict(), "seconds_per_mesh": seconds[n]} for n, r in reports.items()}
+        click.echo(json.dumps(out, indent=2))
+    else:
+        click.echo(_format_side_by_side(reports, seconds))
     _report_skipped(skipped, strict)
 
 
+def _descriptor_list(text: str | None) -> list[str]:
+    """The distinct descriptor names of a comma-separated ``--descriptor`` value."""
+    names = [d.strip() for d in (text or "cf").split(",") if d.strip()]
+    if not names or set(names) - set(DESCRIPTORS) or len(set(names)) < len(names):
+        raise click.BadParameter(
+            f"{text!r}: give distinct names from {', '.join(DESCRIPTORS)}",
+            param_hint="--descriptor",
+        )
+    return names
+
+
+@dataclass(frozen=True)
+class _Run:
+    """The signatures of a collection for one descriptor, in file order."""
+
+    names: list[str]
+    labels: list[str]
+    paths: list[str]
+    signatures: np.ndarray
+    seconds: np.ndarray
+
+
+def _index_run(index_file: Path) -> tuple[str, _Run]:
+    """The descriptor and the signatures of an index (no timings)."""
+    with IndexReader(index_file) as reader:
+        columns = [list(reader.column(key)) for key in ("names", "labels", "paths")]
+        return reader.params.descriptor, _Run(*columns, reader.signatures[:], np.empty(0))
+
+
 def _compute_folder(folder: Path, params: Params, solver, jobs, strict, skipped: list[str]):
-    """Signatures of all meshes in a folder, in file order; failures go to ``skipped``."""
+    """The signatures of all meshes in a folder as a `_Run`; failures go to ``skipped``."""
     found = dict(find_meshes([folder]))
-    hists = {}
-    for outcome in _progress(compute_many(found, params, solver, jobs), len(found), "computing"):
+    sigs = {}
+    what = f"computing {params.descriptor}"
+    for outcome in _progress(compute_many(found, params, solver, jobs), len(found), what):
         if outcome.error:
             skipped.append(outcome.error)
             if strict:
                 break
         else:
-            hists[outcome.path] = outcome.signature.histogram
-    order = [path for path in found if path in hists]
+            sigs[outcome.path] = outcome.signature
+    order = [path for path in found if path in sigs]
     if not order:
         _report_skipped(skipped, strict)
         _fail(f"{folder}: no mesh files")
-    return [found[p] for p in order], np.array([hists[p] for p in order])
+    names = [found[p] for p in order]
+    return _Run(
+        names,
+        [Path(name).parent.name or folder.name for name in names],
+        [str(folder / name) for name in names],
+        np.array([sigs[p].histogram for p in order]),
+        np.array([sigs[p].seconds for p in order]),
+    )
+
+
+def _format_side_by_side(reports: dict, seconds: dict) -> str:
+    """Several descriptors' measures, per-class first tier and seconds per mesh as text."""
+    first = next(iter(reports.values()))
+    keys = list(first.measures)
+    lines = [f"{first.count} queries", f"{'descriptor':<16}" + "".join(f"{k:>8}" for k in keys)]
+    lines[-1] += f"{'s/mesh':>9}"
+    for name, report in reports.items():
+        values = "".join(f"{report.measures[k]:8.3f}" for k in keys)
+        lines.append(f"{name:<16}{values}{seconds[name]:9.3f}")
+    lines += ["first tier (FT) per class:", f"{'class':<16}" + "".join(f"{n:>8}" for n in reports)]
+    for cls in sorted(first.per_class):
+        lines.append(
+            f"{cls:<16}" + "".join(f"{r.per_class[cls]['FT']:8.3f}" for r in reports.values())
+        )
+    return "\n".join(lines)
 
 
 def _format_report(report) -> str:

@@ -37,6 +37,15 @@ class ConformalFactor:
         Length added to every edge by the intrinsic mollification (0 if none was needed).
     curvature_error : float
         ``||K^T - K^R|| / |V| / pi``, paper section 3.4.
+    laplacian : (n, n) scipy.sparse.csc_matrix
+        The cotangent Laplacian L of the (mollified) metric.
+    vertex_area : (n,) float64
+        Barycentric vertex areas, the lumped mass matrix.
+    labels : (n,) int
+        Connected component of each vertex.
+    solve : callable
+        The factorised L (`factorize_laplacian`), for further solves at the cost of one
+        forward and back substitution each.
     """
 
     phi: np.ndarray
@@ -46,6 +55,10 @@ class ConformalFactor:
     n_components: int
     mollified: float
     curvature_error: float
+    laplacian: sp.csc_matrix
+    vertex_area: np.ndarray
+    labels: np.ndarray
+    solve: Callable[[np.ndarray], np.ndarray]
 
 
 def conformal_factor(mesh: Mesh, mollify: float = 1e-5, solver: str = "auto") -> ConformalFactor:
@@ -59,7 +72,7 @@ def conformal_factor(mesh: Mesh, mollify: float = 1e-5, solver: str = "auto") ->
         Intrinsic mollification margin relative to the mean edge length (see
         `geometry.mollify`); it changes nothing on meshes without near-degenerate triangles.
     solver : {"auto", "scipy", "cholmod"}
-        Sparse solver backend, see `solve_laplacian`.
+        Sparse solver backend, see `factorize_laplacian`.
 
     Returns
     -------
@@ -78,11 +91,15 @@ def conformal_factor(mesh: Mesh, mollify: float = 1e-5, solver: str = "auto") ->
     curvature = geometry.angle_defect(geometry.corner_angles(lengths), faces, boundary)
     areas = geometry.face_areas(lengths)
     count, labels = geometry.components(faces, n)
-    target = geometry.target_curvature(curvature, geometry.vertex_areas(areas, faces, n), labels)
+    vertex_area = geometry.vertex_areas(areas, faces, n)
+    target = geometry.target_curvature(curvature, vertex_area, labels)
     laplacian = geometry.cotan_laplacian(lengths, faces, n)
-    phi = solve_laplacian(laplacian, target - curvature, labels, solver)
+    solve = factorize_laplacian(laplacian, labels, solver)
+    phi = solve(target - curvature)
     error = curvature_error(lengths, faces, boundary, phi, target)
-    return ConformalFactor(phi, curvature, target, areas, count, delta, error)
+    return ConformalFactor(
+        phi, curvature, target, areas, count, delta, error, laplacian, vertex_area, labels, solve
+    )
 
 
 def curvature_error(
@@ -127,10 +144,7 @@ def solve_laplacian(
 ) -> np.ndarray:
     """Solve ``L x = rhs`` for a cotangent Laplacian, zero mean per connected component.
 
-    L has one null vector per component (the constants), so one vertex per component is pinned
-    to 0, the remaining symmetric positive definite system ``-L' x' = -rhs'`` is factorised, and
-    each component's mean is subtracted afterwards (the paper's zero-mean condition). ``rhs``
-    must sum to zero on every component; the pinned equation is then implied by the others.
+    The same as ``factorize_laplacian(laplacian, labels, solver)(rhs)``.
 
     Parameters
     ----------
@@ -141,9 +155,7 @@ def solve_laplacian(
     labels : (n,) int
         Connected component of each vertex.
     solver : {"auto", "scipy", "cholmod"}
-        ``"cholmod"``: CHOLMOD's sparse Cholesky (needs the ``cholmod`` extra); ``"scipy"``:
-        SciPy's SuperLU with a symmetric minimum-degree ordering; ``"auto"``: CHOLMOD when
-        installed, else SciPy.
+        Sparse solver backend, see `factorize_laplacian`.
 
     Returns
     -------
@@ -152,8 +164,44 @@ def solve_laplacian(
 
     Raises
     ------
+    SolverError, ValueError, MissingDependencyError
+        As `factorize_laplacian`; `SolverError` also for a non-finite ``rhs`` or solution.
+    """
+    return factorize_laplacian(laplacian, labels, solver)(rhs)
+
+
+def factorize_laplacian(
+    laplacian: sp.spmatrix, labels: np.ndarray, solver: str = "auto"
+) -> Callable[[np.ndarray], np.ndarray]:
+    """Factorise a cotangent Laplacian once, for solves ``L x = rhs`` with zero mean per component.
+
+    L has one null vector per component (the constants), so one vertex per component is pinned
+    to 0, the remaining symmetric positive definite system ``-L' x' = -rhs'`` is factorised, and
+    each solution's mean is subtracted per component afterwards (the paper's zero-mean
+    condition). ``rhs`` must sum to zero on every component; the pinned equation is then implied
+    by the others.
+
+    Parameters
+    ----------
+    laplacian : (n, n) sparse float64
+        Symmetric negative semidefinite Laplacian whose null space is the per-component constants.
+    labels : (n,) int
+        Connected component of each vertex.
+    solver : {"auto", "scipy", "cholmod"}
+        ``"cholmod"``: CHOLMOD's sparse Cholesky (needs the ``cholmod`` extra); ``"scipy"``:
+        SciPy's SuperLU with a symmetric minimum-degree ordering; ``"auto"``: CHOLMOD when
+        installed, else SciPy.
+
+    Returns
+    -------
+    solve : callable
+        ``solve(rhs)`` maps a (n,) float64 right-hand side to the (n,) float64 solution with
+        zero mean on every component, raising `SolverError` for non-finite input or output.
+
+    Raises
+    ------
     SolverError
-        Non-finite input, a failed factorisation or a non-finite solution.
+        Non-finite Laplacian or a failed factorisation.
     ValueError
         Unknown solver name.
     MissingDependencyError
@@ -161,23 +209,34 @@ def solve_laplacian(
     """
     if solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; choose from {', '.join(SOLVERS)}")
-    if not np.all(np.isfinite(rhs)) or not np.all(np.isfinite(laplacian.data)):
+    if not np.all(np.isfinite(laplacian.data)):
         raise SolverError("the Laplacian or curvature is not finite (degenerate triangles?)")
-    n = len(rhs)
     _, pinned = np.unique(labels, return_index=True)
-    keep = np.ones(n, dtype=bool)
+    keep = np.ones(len(labels), dtype=bool)
     keep[pinned] = False
     system = (-laplacian[keep][:, keep]).tocsc()
-    x = np.zeros(n)
+    counts = np.bincount(labels)
+    factor = None
     if system.shape[0]:
         try:
-            x[keep] = _factorize(system, solver)(-rhs[keep])
+            factor = _factorize(system, solver)
         except (RuntimeError, ValueError, ArithmeticError) as exc:
             raise SolverError(f"sparse solve failed: {exc}") from None
-    if not np.all(np.isfinite(x)):
-        raise SolverError("the sparse solve returned a non-finite solution")
-    x -= (np.bincount(labels, weights=x) / np.bincount(labels))[labels]
-    return x
+
+    def solve(rhs: np.ndarray) -> np.ndarray:
+        if not np.all(np.isfinite(rhs)):
+            raise SolverError("the Laplacian or curvature is not finite (degenerate triangles?)")
+        x = np.zeros(len(rhs))
+        if factor is not None:
+            try:
+                x[keep] = factor(-rhs[keep])
+            except (RuntimeError, ValueError, ArithmeticError) as exc:
+                raise SolverError(f"sparse solve failed: {exc}") from None
+        if not np.all(np.isfinite(x)):
+            raise SolverError("the sparse solve returned a non-finite solution")
+        return x - (np.bincount(labels, weights=x) / counts)[labels]
+
+    return solve
 
 
 def available_solvers() -> tuple[str, ...]:

@@ -1,6 +1,6 @@
 """The index: signatures and their metadata in one HDF5 file that is never left half-written.
 
-Layout (format version 1): datasets of one row per mesh, ``signatures`` (N, bins) float32,
+Layout (format version 1): datasets of one row per mesh, ``signatures`` (N, length) float32,
 ``names``, ``labels``, ``paths`` (UTF-8 strings), ``sha256`` (64 ASCII bytes), ``n_vertices``,
 ``n_faces``, ``n_components`` (int64), ``phi_min``, ``phi_max``, ``curvature_error`` (float64);
 file attributes ``format`` ("cfsig-index"), ``format_version``, ``params`` (`Params` as JSON)
@@ -285,12 +285,11 @@ def _create_layout(f: h5py.File, params: Params) -> None:
         params=params.to_json(),
         cfsig_version=__version__,
     )
+    from .signature import signature_length  # here: the query path never loads scipy
+
+    width = signature_length(params)
     f.create_dataset(
-        "signatures",
-        (0, params.bins),
-        np.float32,
-        maxshape=(None, params.bins),
-        chunks=(_CHUNK_ROWS, params.bins),
+        "signatures", (0, width), np.float32, maxshape=(None, width), chunks=(_CHUNK_ROWS, width)
     )
     dtypes = {**{k: _STRING for k in _TEXT}, "sha256": "S64", **_META}
     for key, dtype in dtypes.items():

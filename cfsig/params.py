@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from dataclasses import asdict, dataclass, fields
 
+DESCRIPTORS = ("cf", "cfhks")
+
 
 @dataclass(frozen=True)
 class Params:
@@ -15,6 +17,11 @@ class Params:
 
     Attributes
     ----------
+    descriptor : str
+        What the signature is (one of `DESCRIPTORS`; docs/descriptors.md): ``"cf"``, the
+        paper's histogram of phi, to which every other attribute applies; ``"cfhks"``, the
+        quantiles of phi, the low Laplace-Beltrami spectrum and heat kernel signatures, whose
+        constants are fixed in `cfsig.cfhks` and which uses only ``mollify`` of the others.
     bins : int
         Number of histogram bins (paper section 2.3: 200).
     low, high : float
@@ -32,6 +39,7 @@ class Params:
         (Sharp and Crane 2020); 0 disables it.
     """
 
+    descriptor: str = "cf"
     bins: int = 200
     low: float = -99.5
     high: float = 100.5
@@ -45,6 +53,10 @@ class Params:
             raise ValueError(f"invalid parameters: {self}")
         if self.mollify < 0:
             raise ValueError("mollify must be >= 0")
+        if self.descriptor not in DESCRIPTORS:
+            raise ValueError(
+                f"unknown descriptor {self.descriptor!r}; choose from {', '.join(DESCRIPTORS)}"
+            )
 
     @property
     def edges(self) -> tuple[float, float]:
@@ -57,7 +69,10 @@ class Params:
 
     @classmethod
     def from_json(cls, text: str) -> Params:
-        """Parse what `to_json` wrote; unknown keys raise ``ValueError``."""
+        """Parse what `to_json` wrote; unknown keys raise ``ValueError``.
+
+        An index written before descriptors had names holds the paper's ``"cf"``, the default.
+        """
         data = json.loads(text)
         known = {f.name for f in fields(cls)}
         unknown = set(data) - known

@@ -1,4 +1,8 @@
-"""Search: rank indexed signatures by L1 distance to query signatures (paper section 2.3)."""
+"""Search: rank indexed signatures by L1 distance to query signatures (paper section 2.3).
+
+Every descriptor's vector is built so that its L1 distance is the descriptor's distance
+(`signature.signature_of`), so the search is the same for all.
+"""
 
 from __future__ import annotations
 
@@ -27,7 +31,7 @@ class Hit:
     rank : int
         1 for the nearest.
     distance : float
-        L1 distance between the histograms, in [0, 2].
+        L1 distance between the signature vectors (in [0, 2] for ``cf`` histograms).
     entry : Entry
         Name, label and path of the indexed mesh.
     """
@@ -42,9 +46,9 @@ def l1_distances(queries: np.ndarray, signatures: np.ndarray) -> np.ndarray:
 
     Parameters
     ----------
-    queries : (q, bins) float
+    queries : (q, length) float
         Query signatures.
-    signatures : (N, bins) float
+    signatures : (N, length) float
         Signatures to compare with.
 
     Returns
@@ -68,8 +72,8 @@ def nearest(reader: IndexReader, queries: np.ndarray, k: int) -> tuple[np.ndarra
     ----------
     reader : IndexReader
         An open index with N entries.
-    queries : (q, bins) float
-        Query signatures, made with the index's parameters.
+    queries : (q, length) float
+        Query signatures, made with the index's parameters (and so its descriptor).
     k : int
         Number of results per query; at most N are returned.
 
@@ -118,8 +122,8 @@ def search(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[H
     ----------
     reader : IndexReader
         An open index.
-    queries : (q, bins) float
-        Query signatures, made with the index's parameters.
+    queries : (q, length) float
+        Query signatures, made with the index's parameters (and so its descriptor).
     k : int
         Results per query.
 

@@ -1,4 +1,9 @@
-"""The signature: a histogram of phi sampled uniformly over the surface (paper section 2.3)."""
+"""The signature: a histogram of phi sampled uniformly over the surface (paper section 2.3).
+
+It is the ``cf`` descriptor; `signature_of` also makes the other descriptors of `DESCRIPTORS`
+(docs/descriptors.md) from the same conformal factor. Every descriptor is a vector whose L1
+distance is the descriptor's distance.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +14,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .cfhks import LENGTH as CFHKS_LENGTH
+from .cfhks import cfhks_vector
 from .conformal import ConformalFactor, conformal_factor
 from .errors import MeshError, SolverError
 from .mesh import Mesh, parse_mesh, read_bytes
@@ -21,8 +28,9 @@ class Signature:
 
     Attributes
     ----------
-    histogram : (bins,) float64
-        The signature, summing to 1.
+    histogram : (signature_length(params),) float64
+        The signature vector: for ``cf`` the histogram of phi, summing to 1; for another
+        descriptor its vector (`signature_of`).
     phi : (n,) float64
         Conformal factor per vertex.
     n_vertices, n_faces, n_components : int
@@ -109,8 +117,24 @@ def histogram(values: np.ndarray, params: Params) -> np.ndarray:
     return np.bincount(index, minlength=params.bins) / len(values)
 
 
+def signature_length(params: Params) -> int:
+    """Length of the signature vectors that ``params`` make.
+
+    Parameters
+    ----------
+    params : Params
+        Signature parameters.
+
+    Returns
+    -------
+    length : int
+        ``params.bins`` for ``cf``; the descriptor's fixed length otherwise.
+    """
+    return params.bins if params.descriptor == "cf" else CFHKS_LENGTH
+
+
 def signature_of(cf: ConformalFactor, faces: np.ndarray, params: Params) -> np.ndarray:
-    """The signature of a mesh whose conformal factor is known.
+    """The signature of a mesh whose conformal factor is known, for ``params.descriptor``.
 
     Parameters
     ----------
@@ -123,10 +147,17 @@ def signature_of(cf: ConformalFactor, faces: np.ndarray, params: Params) -> np.n
 
     Returns
     -------
-    hist : (bins,) float64
-        The histogram of phi at ``samples_per_face * m`` surface samples plus the vertices,
-        summing to 1.
+    signature : (signature_length(params),) float64
+        For ``cf``: the histogram of phi at ``samples_per_face * m`` surface samples plus the
+        vertices, summing to 1. For ``cfhks``: `cfhks.cfhks_vector`.
+
+    Raises
+    ------
+    SolverError
+        ``cfhks`` only: the eigenvalue iteration failed.
     """
+    if params.descriptor == "cfhks":
+        return cfhks_vector(cf)
     phi = cf.phi
     if params.normalize:
         span = np.ptp(phi)
@@ -156,7 +187,7 @@ def compute_signature(mesh: Mesh, params: Params, solver: str = "auto") -> Signa
     Raises
     ------
     SolverError, MissingDependencyError
-        As `conformal_factor`.
+        As `conformal_factor` and `signature_of`.
     """
     start = time.perf_counter()
     cf = conformal_factor(mesh, params.mollify, solver)

@@ -1,0 +1,134 @@
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from conftest import disk, icosphere, open_cylinder, random_rotation, torus
+
+from cfsig import cfhks
+from cfsig.cli import main
+from cfsig.conformal import conformal_factor
+from cfsig.index import IndexReader
+from cfsig.mesh import clean_mesh
+from cfsig.params import Params
+from cfsig.signature import compute_signature, signature_length
+
+CFHKS = Params(descriptor="cfhks")
+
+
+def _bumpy(stretch=1.5):
+    v, f = icosphere(3)
+    v = v * [1.0, 0.6, 0.5]
+    v[:, 0] += stretch * np.clip(v[:, 0], 0, None) ** 4
+    return v, f
+
+
+def _vector(v, f):
+    return compute_signature(clean_mesh(v, f), CFHKS).histogram
+
+
+def test_weighted_quantiles():
+    q = cfhks.weighted_quantiles(np.array([3.0, 1.0, 2.0]), np.array([1.0, 1.0, 2.0]), 4)
+    assert np.array_equal(q, [1.0, 2.0, 2.0, 3.0])
+
+
+def test_length_and_channels():
+    v, f = _bumpy()
+    parts = cfhks.channels(conformal_factor(clean_mesh(v, f)))
+    assert parts["phi"].shape == (cfhks.QUANTILES,)
+    assert parts["spectrum"].shape == (cfhks.EIGENPAIRS,)
+    assert parts["heat"].shape == (len(cfhks.TIMES), cfhks.QUANTILES)
+    assert np.all(np.diff(parts["spectrum"]) >= 0) and np.all(np.diff(parts["heat"]) >= 0)
+    assert _vector(v, f).shape == (cfhks.LENGTH,) == (signature_length(CFHKS),)
+
+
+def test_invariant_to_rigid_motion_and_scale():
+    v, f = _bumpy()
+    base = _vector(v, f)
+    moved = _vector(0.2 * v @ random_rotation(7).T + [5.0, 1.0, -2.0], f)
+    assert np.abs(moved - base).sum() < 1e-6 * np.abs(base).sum()
+
+
+def test_deterministic():
+    v, f = _bumpy()
+    assert np.array_equal(_vector(v, f), _vector(v, f))
+
+
+def test_distance_separates_shapes():
+    v, f = _bumpy()
+    base = _vector(v, f)
+    same = _vector(v @ random_rotation(3).T, f)
+    other_bump = _vector(*_bumpy(stretch=4.0))
+    ring = _vector(*torus(nu=48, nv=16))
+    d_same, d_bump, d_ring = (np.abs(x - base).sum() for x in (same, other_bump, ring))
+    assert d_same < 0.01 * min(d_bump, d_ring)
+
+
+@pytest.mark.parametrize(
+    "mesh", [disk(), open_cylinder(), icosphere(0)], ids=["disk", "cylinder", "tiny"]
+)
+def test_open_and_tiny_meshes_give_finite_vectors(mesh):
+    vector = _vector(*mesh)
+    assert vector.shape == (cfhks.LENGTH,) and np.all(np.isfinite(vector))
+
+
+def test_params_name_the_descriptor():
+    assert Params().descriptor == "cf"
+    with pytest.raises(ValueError, match="unknown descriptor"):
+        Params(descriptor="shapedna")
+    old = json.loads(Params().to_json())
+    del old["descriptor"]  # an index written before descriptors had names
+    assert Params.from_json(json.dumps(old)) == Params()
+
+
+def _write_off(path, v, f):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    lines = ["OFF", f"{len(v)} {len(f)} 0"]
+    lines += [" ".join(f"{x:.9g}" for x in p) for p in v]
+    lines += ["3 " + " ".join(map(str, t)) for t in f]
+    path.write_text("\n".join(lines) + "\n")
+
+
+@pytest.fixture
+def collection(tmp_path):
+    for i, stretch in enumerate((1.0, 1.3)):
+        v, f = _bumpy(stretch)
+        _write_off(tmp_path / "shapes" / "bump" / f"{i}.off", v @ random_rotation(i).T, f)
+    for i, r in enumerate((0.3, 0.35)):
+        _write_off(tmp_path / "shapes" / "ring" / f"{i}.off", *torus(r=r, nu=40, nv=14))
+    return tmp_path / "shapes"
+
+
+def test_index_and_query_use_the_index_descriptor(collection, tmp_path):
+    runner = CliRunner()
+    index = tmp_path / "i.h5"
+    args = ["index", str(collection), "-o", str(index), "--descriptor", "cfhks", "--jobs", "1"]
+    result = runner.invoke(main, args)
+    assert result.exit_code == 0, result.output
+    with IndexReader(index) as reader:
+        assert reader.params.descriptor == "cfhks"
+        assert reader.signatures.shape == (4, cfhks.LENGTH)
+    query = str(collection / "bump" / "1.off")
+    result = runner.invoke(main, ["query", str(index), query, "-k", "2", "--json"])
+    assert result.exit_code == 0, result.output
+    hits = json.loads(result.stdout)
+    assert hits[0]["name"] == "bump/1.off" and hits[0]["distance"] < 1e-5
+    assert hits[1]["label"] == "bump"
+
+
+def test_evaluate_side_by_side(collection):
+    runner = CliRunner()
+    args = ["evaluate", str(collection), "--descriptor", "cf,cfhks", "--jobs", "1"]
+    result = runner.invoke(main, args)
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.splitlines()
+    assert lines[0] == "4 queries"
+    assert lines[2].startswith("cf ") and lines[3].startswith("cfhks ")
+    assert "first tier (FT) per class:" in lines
+    assert lines[-1].startswith("ring")
+
+
+@pytest.mark.parametrize("given", ["cf,shapedna", "cf,cf", ","])
+def test_evaluate_rejects_bad_descriptor_lists(collection, given):
+    result = CliRunner().invoke(main, ["evaluate", str(collection), "--descriptor", given])
+    assert result.exit_code == 2 and "--descriptor" in result.output

@@ -1,0 +1,87 @@
+import numpy as np
+import pytest
+import scipy.linalg
+from conftest import icosphere, random_rotation, torus
+
+from cfsig.conformal import conformal_factor
+from cfsig.mesh import clean_mesh
+from cfsig.spectrum import heat_kernel_signature, laplace_spectrum
+
+
+def _spectrum(v, f, count):
+    cf = conformal_factor(clean_mesh(v, f))
+    return cf, laplace_spectrum(cf.laplacian, cf.vertex_area, cf.labels, cf.solve, count)
+
+
+def test_sphere_eigenvalues_are_analytic():
+    # on a sphere of radius r the eigenvalues are l (l + 1) / r^2, with multiplicity 2 l + 1
+    r = 2.0
+    v, f = icosphere(3)
+    _, s = _spectrum(r * v, f, 15)
+    expected = np.repeat([2.0, 6.0, 12.0], [3, 5, 7]) / r**2
+    assert np.allclose(s.eigenvalues, expected, rtol=0.02)
+
+
+@pytest.mark.parametrize("count", [3, 8])
+def test_repeated_eigenvalues_are_all_found(count):
+    # a single Lanczos run finds only two of the three l = 1 copies here: the check must add them
+    v, f = icosphere(2)
+    _, s = _spectrum(v, f, count)
+    assert np.allclose(s.eigenvalues, np.repeat([2.0, 5.864], [3, 5])[:count], rtol=1e-3)
+
+
+def test_matches_dense_generalised_problem():
+    v, f = torus(nu=24, nv=10)
+    cf, s = _spectrum(v, f, 12)
+    reference = scipy.linalg.eigh(-cf.laplacian.toarray(), np.diag(cf.vertex_area))[0]
+    assert np.allclose(s.eigenvalues, reference[1:13], rtol=1e-6)
+    vectors = s.eigenvectors
+    assert np.allclose(vectors.T @ (cf.vertex_area[:, None] * vectors), np.eye(12), atol=1e-8)
+    residual = -cf.laplacian @ vectors - cf.vertex_area[:, None] * vectors * s.eigenvalues
+    assert np.abs(residual).max() < 1e-6 * np.abs(cf.laplacian @ vectors).max()
+
+
+def test_small_mesh_solved_densely_gives_all_it_has():
+    v, f = icosphere(0)  # 12 vertices: 11 nonzero eigenvalues
+    cf, s = _spectrum(v, f, 20)
+    reference = scipy.linalg.eigh(-cf.laplacian.toarray(), np.diag(cf.vertex_area))[0]
+    assert len(s.eigenvalues) == 11
+    assert np.allclose(s.eigenvalues, reference[1:], rtol=1e-8)
+
+
+def test_components_leave_out_every_constant():
+    v, f = icosphere(2)
+    both = clean_mesh(np.vstack([v, v + 5]), np.vstack([f, f + len(v)]))
+    cf = conformal_factor(both)
+    s = laplace_spectrum(cf.laplacian, cf.vertex_area, cf.labels, cf.solve, 6)
+    _, alone = _spectrum(v, f, 3)
+    # two equal spheres: each eigenvalue twice, no zero eigenvalue of the second component
+    assert np.allclose(s.eigenvalues, np.repeat(alone.eigenvalues, 2), rtol=1e-6)
+
+
+def test_invariant_to_rigid_motion_and_scaled_by_size():
+    v, f = torus(nu=30, nv=12)
+    _, base = _spectrum(v, f, 10)
+    _, moved = _spectrum(3.0 * v @ random_rotation(4).T + [1.0, 2.0, -3.0], f, 10)
+    assert np.allclose(moved.eigenvalues, base.eigenvalues / 9.0, rtol=1e-7)
+    assert np.isclose(moved.area, 9.0 * base.area)
+
+
+def test_heat_kernel_signature_of_a_sphere():
+    v, f = icosphere(3)
+    _, s = _spectrum(v, f, 15)  # l = 1, 2, 3 complete
+    t = np.array([0.5, 2.0])
+    hks = heat_kernel_signature(s, t)
+    ls = np.arange(4)
+    expected = ((2 * ls + 1)[:, None] * np.exp(-np.outer(ls * (ls + 1), t))).sum(0) / s.area
+    assert np.allclose(hks, expected, rtol=0.01)
+    assert np.all(hks.std(axis=0) < 1e-3 * hks.mean(axis=0))
+
+
+@pytest.mark.parametrize("count", [1, 5])
+def test_deterministic(count):
+    v, f = torus(nu=30, nv=12)
+    _, a = _spectrum(v, f, count)
+    _, b = _spectrum(v, f, count)
+    assert np.array_equal(a.eigenvalues, b.eigenvalues)
+    assert np.array_equal(a.eigenvectors, b.eigenvectors)
