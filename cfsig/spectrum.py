@@ -25,7 +25,7 @@ from .errors import SolverError
 _TOLERANCE = 1e-8
 _CHECK_TOLERANCE = 1e-3  # the quick search for a missed copy of a repeated eigenvalue
 _CHECK_VECTORS = 8  # Lanczos vectors of that search
-_DENSE_BELOW = 64  # vertices: smaller meshes are solved densely (ARPACK needs n > 2k)
+_DENSE_BELOW = 64  # vertices, and 3 per eigenpair: smaller problems are solved densely
 
 
 @dataclass(frozen=True)
@@ -96,7 +96,7 @@ def laplace_spectrum(
     null = np.zeros((n, n_components))
     null[np.arange(n), labels] = root
     null /= np.linalg.norm(null, axis=0)
-    if n < _DENSE_BELOW or count < 1:
+    if n < max(_DENSE_BELOW, 3 * count):
         values, vectors = _dense_eigenpairs(laplacian, root, null, count)
     else:
         values, vectors = _lanczos_eigenpairs(root, null, solve, count)
