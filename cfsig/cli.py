@@ -28,6 +28,7 @@ from .signature import mesh_and_signature, signature_file
 EXIT_ERROR = 1
 EXIT_SKIPPED = 3
 _COMMIT_SECONDS = 30.0
+RETRIEVAL_DESCRIPTOR = "cfhks"  # the default of index and evaluate: docs/descriptors.md
 _GRID_COLUMNS = 7  # tiles per row of a single query's --png grid
 
 _params_options = [
@@ -44,7 +45,7 @@ _descriptor_option = click.option(
     type=click.Choice(DESCRIPTORS),
     default=None,
     help="What to compute: the paper's histogram (cf) or phi, spectrum and heat kernel "
-    "signature (cfhks) [cf; an existing index keeps its own].",
+    "signature (cfhks) [compute: cf; index: cfhks, or an existing index's own].",
 )
 _solver_option = click.option(
     "--solver",
@@ -252,6 +253,7 @@ def index(
         if output.exists():
             with IndexReader(output) as reader:
                 base = reader.params
+        descriptor = descriptor or (None if base else RETRIEVAL_DESCRIPTOR)
         params = _params(base, normalize=normalize, seed=seed, bins=bins, descriptor=descriptor)
         with IndexWriter(output, params) as writer:
             added, skipped = _index_into(writer, paths, solver, jobs, strict, commit_every)
@@ -374,7 +376,7 @@ def query(index_file, meshes, k, solver, as_json, png) -> None:
     "--descriptor",
     "descriptors",
     help=f"Descriptors to compare side by side, comma-separated ({', '.join(DESCRIPTORS)}) "
-    "[cf; with --index, the index's own].",
+    f"[{RETRIEVAL_DESCRIPTOR}; with --index, the index's own].",
 )
 @_with(_params_options)
 @_solver_option
@@ -473,7 +475,7 @@ def evaluate(
 
 def _descriptor_list(text: str | None) -> list[str]:
     """The distinct descriptor names of a comma-separated ``--descriptor`` value."""
-    names = [d.strip() for d in (text or "cf").split(",") if d.strip()]
+    names = [d.strip() for d in (text or RETRIEVAL_DESCRIPTOR).split(",") if d.strip()]
     if not names or set(names) - set(DESCRIPTORS) or len(set(names)) < len(names):
         raise click.BadParameter(
             f"{text!r}: give distinct names from {', '.join(DESCRIPTORS)}",
