@@ -54,7 +54,7 @@ def main() -> None:
     cfsig("compute", *springs, "--png", out("springs_phi.png"), "--hist", out("springs.png"))
     with tempfile.TemporaryDirectory() as tmp:
         index = str(Path(tmp) / "shrec07.h5")
-        cfsig("index", str(args.folder), "-o", index)
+        cfsig("index", str(args.folder), "-o", index, "--descriptor", "cf")  # the paper's
         cfsig("evaluate", "--index", index, "--plot", out("precision_recall.png"))
         cfsig("query", index, mesh("ant/81.off"), "-k", "20", "--png", out("ant_query.png"))
     for png in sorted(args.out.glob("*.png")):
