@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench bench-perf clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -22,6 +22,14 @@ test: $(BIN)/python
 bench: $(BIN)/python
 	$(BIN)/pip install -q -e '.[test,bench]'
 	$(BIN)/python benchmarks/retrieval.py
+
+# The figures of docs/performance.md (about half an hour on two cores).
+bench-perf: $(BIN)/python
+	$(BIN)/pip install -q -e '.[bench,cholmod,dask]'
+	$(BIN)/python benchmarks/per_mesh.py
+	$(BIN)/python benchmarks/solvers.py
+	$(BIN)/python benchmarks/shapedna.py
+	$(BIN)/python benchmarks/index_jobs.py
 
 clean:
 	rm -rf $(VENV) cfsig-demo .pytest_cache .ruff_cache

@@ -4,17 +4,20 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
+from itertools import islice
 from pathlib import Path
 
-from .errors import CfsigError
+from .errors import CfsigError, ClusterError, MissingDependencyError
 from .params import Params
 from .signature import Signature, signature_file
 
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+_CONNECT_TIMEOUT = "20s"
+Compute = Callable[[Path, Params, str], Signature]
 
 
 @dataclass(frozen=True)
@@ -37,31 +40,55 @@ class Outcome:
 
 
 def compute_many(
-    paths: Iterable[Path], params: Params, solver: str = "auto", jobs: int | None = None
+    paths: Iterable[Path],
+    params: Params,
+    solver: str = "auto",
+    jobs: int | None = None,
+    scheduler: str | None = None,
+    compute: Compute = signature_file,
 ) -> Iterator[Outcome]:
-    """Signatures of many files in a pool of worker processes, yielded as they finish.
+    """Signatures of many files in worker processes, yielded as they finish.
 
     Files are taken from ``paths`` lazily, with a bounded number in flight, so memory does not
-    grow with the number of files. Workers run with one BLAS/OpenMP thread each. A worker that
-    dies (a crash in native code, the out-of-memory killer) fails only its own file: after a
-    pool breaks, the files that were in flight are retried one at a time.
+    grow with the number of files. Workers run with one BLAS/OpenMP thread each. Locally, a
+    worker that dies (a crash in native code, the out-of-memory killer) fails only its own
+    file: after a pool breaks, the files that were in flight are retried one at a time. On a
+    Dask cluster, a task whose worker dies is retried by Dask on another worker a few times,
+    then fails alone.
 
     Parameters
     ----------
     paths : iterable of Path
-        Mesh files.
+        Mesh files. With ``scheduler``, each must be readable under its absolute path on every
+        Dask worker (a shared file system).
     params : Params
         Signature parameters.
-    solver : {"auto", "scipy", "cholmod"}
+    solver : {"auto", "cholmod", "eigen", "scipy"}
         Sparse solver backend.
     jobs : int, optional
-        Worker processes; default: the number of CPU cores.
+        Local worker processes; default: the number of CPU cores. Ignored with ``scheduler``.
+    scheduler : str, optional
+        Address of a running Dask scheduler (``tcp://host:port``): compute on its workers
+        instead of local processes. Needs the ``dask`` extra, and cfsig installed on the workers.
+    compute : callable
+        ``compute(path, params, solver) -> Signature``, a module-level function (it is pickled
+        by name); `signature_file` unless a caller wraps it.
 
     Yields
     ------
     outcome : Outcome
         One per path, in completion order.
+
+    Raises
+    ------
+    MissingDependencyError
+        ``scheduler`` given and Dask's distributed package not installed.
+    ClusterError
+        The scheduler cannot be reached.
     """
+    if scheduler is not None:
+        yield from _compute_on_cluster(paths, params, solver, scheduler, compute)
+        return
     jobs = max(1, jobs or os.cpu_count() or 1)
     pending = iter(paths)
     suspects: list[Path] = []
@@ -69,7 +96,7 @@ def compute_many(
         running: dict[Future, Path] = {}
         while True:
             while len(running) < 2 * jobs and (path := next(pending, None)) is not None:
-                running[pool.submit(_work, path, params, solver)] = path
+                running[pool.submit(_work, path, params, solver, compute)] = path
             if not running:
                 break
             done, _ = wait(running, return_when=FIRST_COMPLETED)
@@ -84,25 +111,65 @@ def compute_many(
                 break
     if suspects:
         for path in suspects:
-            yield _isolated(path, params, solver)
-        yield from compute_many(pending, params, solver, jobs)
+            yield _isolated(path, params, solver, compute)
+        yield from compute_many(pending, params, solver, jobs, compute=compute)
 
 
-def _work(path: Path, params: Params, solver: str) -> Outcome:
+def _compute_on_cluster(
+    paths: Iterable[Path], params: Params, solver: str, address: str, compute: Compute
+) -> Iterator[Outcome]:
+    """`compute_many` on the workers of a Dask cluster, a sliding window of tasks in flight."""
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise MissingDependencyError(
+            "--scheduler needs Dask's distributed package: pip install 'cfsig[dask]'"
+        ) from None
+    try:
+        client = Client(address, timeout=_CONNECT_TIMEOUT, set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise ClusterError(f"cannot connect to the Dask scheduler at {address}: {exc}") from None
+    with client:
+        window = 2 * max(1, sum(client.nthreads().values()))
+        pending = iter(paths)
+        running: dict = {}
+
+        def submit(count: int) -> list:
+            """Send up to ``count`` more files to the cluster; return their futures."""
+            futures = []
+            for path in islice(pending, count):
+                absolute = str(Path(path).resolve())
+                futures.append(client.submit(_work, absolute, params, solver, compute, pure=False))
+                running[futures[-1]] = path
+            return futures
+
+        tasks = as_completed(submit(window), loop=client.loop)
+        for future in tasks:
+            path = running.pop(future)
+            try:
+                outcome = future.result()
+                yield Outcome(path, outcome.signature, outcome.error)
+            except Exception as exc:  # Dask re-raises whatever failed remotely, or KilledWorker
+                yield Outcome(path, None, f"{path}: failed on the cluster: {exc}")
+            future.release()
+            tasks.update(submit(1))
+
+
+def _work(path: Path, params: Params, solver: str, compute: Compute) -> Outcome:
     """Compute one file's signature in a worker, turning library errors into an outcome."""
     try:
-        return Outcome(path, signature_file(path, params, solver))
+        return Outcome(path, compute(path, params, solver))
     except CfsigError as exc:
         return Outcome(path, None, str(exc))
     except MemoryError:
         return Outcome(path, None, f"{path}: out of memory")
 
 
-def _isolated(path: Path, params: Params, solver: str) -> Outcome:
+def _isolated(path: Path, params: Params, solver: str, compute: Compute) -> Outcome:
     """Compute one file alone in a fresh worker, reporting a crash of that worker."""
     with _pool(1) as pool:
         try:
-            return pool.submit(_work, path, params, solver).result()
+            return pool.submit(_work, path, params, solver, compute).result()
         except BrokenProcessPool:
             return Outcome(path, None, f"{path}: the worker process crashed on this file")
 

@@ -52,7 +52,7 @@ _solver_option = click.option(
     type=click.Choice(SOLVERS),
     default="auto",
     show_default=True,
-    help="Sparse solver: CHOLMOD when installed (auto), or SciPy's SuperLU.",
+    help="Sparse solver: the fastest installed (auto), CHOLMOD, Eigen (libigl) or SciPy's SuperLU.",
 )
 _jobs_option = click.option(
     "--jobs",
@@ -225,6 +225,11 @@ def _report_errors(errors: list[str]) -> None:
 @_descriptor_option
 @_solver_option
 @_jobs_option
+@click.option(
+    "--scheduler", metavar="ADDRESS",
+    help="Compute on the workers of a running Dask cluster (tcp://host:port) instead of local "
+    "processes; the mesh paths must be readable on the workers. Needs the dask extra.",
+)  # fmt: skip
 @click.option("--strict", is_flag=True, help="Stop at the first file that fails.")
 @click.option(
     "--commit-every",
@@ -234,7 +239,7 @@ def _report_errors(errors: list[str]) -> None:
     help="Commit to the index file after this many meshes (and every 30 s).",
 )
 def index(
-    paths, output, normalize, seed, bins, descriptor, solver, jobs, strict, commit_every
+    paths, output, normalize, seed, bins, descriptor, solver, jobs, scheduler, strict, commit_every
 ) -> None:
     """Index mesh files and folders (recursively: OFF, OBJ, PLY, STL) into an HDF5 file.
 
@@ -247,7 +252,10 @@ def index(
     \b
     Example:
       cfsig index shrec07/ -o shrec07.h5 --jobs 2
+      cfsig index /shared/shrec07/ -o shrec07.h5 --scheduler tcp://10.0.0.5:8786
     """
+    if jobs is not None and scheduler is not None:
+        raise click.UsageError("give --jobs or --scheduler, not both")
     try:
         base = None
         if output.exists():
@@ -256,7 +264,9 @@ def index(
         descriptor = descriptor or (None if base else RETRIEVAL_DESCRIPTOR)
         params = _params(base, normalize=normalize, seed=seed, bins=bins, descriptor=descriptor)
         with IndexWriter(output, params) as writer:
-            added, skipped = _index_into(writer, paths, solver, jobs, strict, commit_every)
+            added, skipped = _index_into(
+                writer, paths, solver, jobs, scheduler, strict, commit_every
+            )
     except CfsigError as exc:
         _fail(str(exc))
     click.echo(f"{output}: {added} meshes added or updated, {len(writer.known)} in the index")
@@ -264,7 +274,7 @@ def index(
 
 
 def _index_into(
-    writer: IndexWriter, paths, solver: str, jobs, strict: bool, commit_every: int
+    writer: IndexWriter, paths, solver: str, jobs, scheduler, strict: bool, commit_every: int
 ) -> tuple[int, list[str]]:
     """Compute and commit the new and changed meshes; return their count and the failures."""
     todo, names, seen, skipped = [], {}, set(), []
@@ -277,7 +287,7 @@ def _index_into(
         if not writer.is_current(name, path):
             todo.append(path)
     added, last_commit = 0, time.monotonic()
-    outcomes = compute_many(todo, writer.params, solver, jobs)
+    outcomes = compute_many(todo, writer.params, solver, jobs, scheduler)
     for outcome in _progress(outcomes, len(todo), "indexing"):
         if outcome.error:
             skipped.append(outcome.error)

@@ -13,7 +13,9 @@ from . import geometry
 from .errors import MissingDependencyError, SolverError
 from .mesh import Mesh
 
-SOLVERS = ("auto", "scipy", "cholmod")
+SOLVERS = ("auto", "cholmod", "eigen", "scipy")
+# The order "auto" tries the backends in: fastest first, as measured by benchmarks/solvers.py.
+_PREFERENCE = ("cholmod", "eigen", "scipy")
 
 
 @dataclass(frozen=True)
@@ -61,6 +63,76 @@ class ConformalFactor:
     solve: Callable[[np.ndarray], np.ndarray]
 
 
+@dataclass(frozen=True)
+class Operators:
+    """The discrete operators of a mesh: everything the solve for phi needs.
+
+    Attributes
+    ----------
+    lengths : (m, 3) float64
+        Edge lengths after mollification, opposite each corner.
+    mollified : float
+        Length added to every edge by the intrinsic mollification (0 if none was needed).
+    boundary : (n,) bool
+        Boundary vertices.
+    curvature : (n,) float64
+        Angle defects K^orig, radians.
+    face_areas : (m,) float64
+        Triangle areas.
+    n_components : int
+        Number of connected components.
+    labels : (n,) int32
+        Connected component of each vertex.
+    vertex_area : (n,) float64
+        Barycentric vertex areas, the lumped mass matrix.
+    target : (n,) float64
+        Target curvature K^T, radians.
+    laplacian : (n, n) scipy.sparse.csc_matrix
+        Cotangent Laplacian, negative semidefinite.
+    """
+
+    lengths: np.ndarray
+    mollified: float
+    boundary: np.ndarray
+    curvature: np.ndarray
+    face_areas: np.ndarray
+    n_components: int
+    labels: np.ndarray
+    vertex_area: np.ndarray
+    target: np.ndarray
+    laplacian: sp.csc_matrix
+
+
+def operators(mesh: Mesh, mollify: float = 1e-5) -> Operators:
+    """Curvature, target curvature and cotangent Laplacian of a mesh (paper section 2.2).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        A checked triangle mesh with n vertices and m faces (at most two faces per edge and one
+        fan per vertex, as `clean_mesh` makes it).
+    mollify : float
+        Intrinsic mollification margin relative to the mean edge length (see
+        `geometry.mollify`); it changes nothing on meshes without near-degenerate triangles.
+
+    Returns
+    -------
+    ops : Operators
+    """
+    n, faces = len(mesh.vertices), mesh.faces
+    lengths, delta = geometry.mollify(geometry.edge_lengths(mesh.vertices, faces), mollify)
+    areas = geometry.face_areas(lengths)
+    laplacian = geometry.cotan_laplacian(lengths, faces, n, areas)
+    boundary = geometry.boundary_vertices(faces, laplacian)
+    curvature = geometry.angle_defect(geometry.corner_angles(lengths), faces, boundary)
+    count, labels = geometry.components(laplacian)
+    vertex_area = geometry.vertex_areas(areas, faces, n)
+    target = geometry.target_curvature(curvature, vertex_area, labels)
+    return Operators(
+        lengths, delta, boundary, curvature, areas, count, labels, vertex_area, target, laplacian
+    )
+
+
 def conformal_factor(mesh: Mesh, mollify: float = 1e-5, solver: str = "auto") -> ConformalFactor:
     """Compute the discrete conformal factor of a mesh (paper section 2.2).
 
@@ -69,9 +141,8 @@ def conformal_factor(mesh: Mesh, mollify: float = 1e-5, solver: str = "auto") ->
     mesh : Mesh
         A checked triangle mesh with n vertices and m faces.
     mollify : float
-        Intrinsic mollification margin relative to the mean edge length (see
-        `geometry.mollify`); it changes nothing on meshes without near-degenerate triangles.
-    solver : {"auto", "scipy", "cholmod"}
+        Intrinsic mollification margin, see `operators`.
+    solver : {"auto", "cholmod", "eigen", "scipy"}
         Sparse solver backend, see `factorize_laplacian`.
 
     Returns
@@ -85,21 +156,14 @@ def conformal_factor(mesh: Mesh, mollify: float = 1e-5, solver: str = "auto") ->
     MissingDependencyError
         ``solver="cholmod"`` without a CHOLMOD binding installed.
     """
-    n, faces = len(mesh.vertices), mesh.faces
-    lengths, delta = geometry.mollify(geometry.edge_lengths(mesh.vertices, faces), mollify)
-    boundary = geometry.boundary_vertices(faces, n)
-    curvature = geometry.angle_defect(geometry.corner_angles(lengths), faces, boundary)
-    areas = geometry.face_areas(lengths)
-    count, labels = geometry.components(faces, n)
-    vertex_area = geometry.vertex_areas(areas, faces, n)
-    target = geometry.target_curvature(curvature, vertex_area, labels)
-    laplacian = geometry.cotan_laplacian(lengths, faces, n)
-    solve = factorize_laplacian(laplacian, labels, solver)
-    phi = solve(target - curvature)
-    error = curvature_error(lengths, faces, boundary, phi, target)
+    ops = operators(mesh, mollify)
+    solve = factorize_laplacian(ops.laplacian, ops.labels, solver)
+    phi = solve(ops.target - ops.curvature)
+    error = curvature_error(ops.lengths, mesh.faces, ops.boundary, phi, ops.target)
     return ConformalFactor(
-        phi, curvature, target, areas, count, delta, error, laplacian, vertex_area, labels, solve
-    )
+        phi, ops.curvature, ops.target, ops.face_areas, ops.n_components, ops.mollified, error,
+        ops.laplacian, ops.vertex_area, ops.labels, solve,
+    )  # fmt: skip
 
 
 def curvature_error(
@@ -133,7 +197,8 @@ def curvature_error(
     error : float
         Dimensionless, in units of pi.
     """
-    edge_phi = phi[faces][:, [1, 2, 0]] + phi[faces][:, [2, 0, 1]]
+    corner_phi = phi[faces]
+    edge_phi = corner_phi[:, [1, 2, 0]] + corner_phi[:, [2, 0, 1]]
     scaled = lengths * np.exp(-edge_phi / 2)
     reached = geometry.angle_defect(geometry.corner_angles(scaled), faces, boundary)
     return float(np.linalg.norm(target - reached) / len(phi) / np.pi)
@@ -154,7 +219,7 @@ def solve_laplacian(
         Right-hand side, summing to zero per component.
     labels : (n,) int
         Connected component of each vertex.
-    solver : {"auto", "scipy", "cholmod"}
+    solver : {"auto", "cholmod", "eigen", "scipy"}
         Sparse solver backend, see `factorize_laplacian`.
 
     Returns
@@ -187,10 +252,11 @@ def factorize_laplacian(
         Symmetric negative semidefinite Laplacian whose null space is the per-component constants.
     labels : (n,) int
         Connected component of each vertex.
-    solver : {"auto", "scipy", "cholmod"}
-        ``"cholmod"``: CHOLMOD's sparse Cholesky (needs the ``cholmod`` extra); ``"scipy"``:
-        SciPy's SuperLU with a symmetric minimum-degree ordering; ``"auto"``: CHOLMOD when
-        installed, else SciPy.
+    solver : {"auto", "cholmod", "eigen", "scipy"}
+        ``"cholmod"``: CHOLMOD's sparse Cholesky (needs the ``cholmod`` extra); ``"eigen"``:
+        Eigen's simplicial Cholesky with an AMD ordering, through libigl; ``"scipy"``: SciPy's
+        SuperLU with a symmetric minimum-degree ordering; ``"auto"``: the fastest installed
+        (see `available_solvers`).
 
     Returns
     -------
@@ -211,15 +277,12 @@ def factorize_laplacian(
         raise ValueError(f"unknown solver {solver!r}; choose from {', '.join(SOLVERS)}")
     if not np.all(np.isfinite(laplacian.data)):
         raise SolverError("the Laplacian or curvature is not finite (degenerate triangles?)")
-    _, pinned = np.unique(labels, return_index=True)
-    keep = np.ones(len(labels), dtype=bool)
-    keep[pinned] = False
-    system = (-laplacian[keep][:, keep]).tocsc()
+    system, keep = pinned_system(laplacian, labels)
     counts = np.bincount(labels)
     factor = None
     if system.shape[0]:
         try:
-            factor = _factorize(system, solver)
+            factor = factorize(system, solver)
         except (RuntimeError, ValueError, ArithmeticError) as exc:
             raise SolverError(f"sparse solve failed: {exc}") from None
 
@@ -239,28 +302,88 @@ def factorize_laplacian(
     return solve
 
 
+def pinned_system(laplacian: sp.spmatrix, labels: np.ndarray) -> tuple[sp.csc_matrix, np.ndarray]:
+    """The symmetric positive definite system left once one vertex per component is pinned.
+
+    Parameters
+    ----------
+    laplacian : (n, n) sparse float64
+        Negative semidefinite Laplacian whose null space is the per-component constants.
+    labels : (n,) int
+        Connected component of each vertex; the first vertex of each component is pinned.
+
+    Returns
+    -------
+    system : (k, k) scipy.sparse.csc_matrix
+        ``-L`` without the pinned rows and columns, k = n - number of components.
+    keep : (n,) bool
+        The vertices that remain.
+    """
+    _, pinned = np.unique(labels, return_index=True)
+    keep = np.ones(len(labels), dtype=bool)
+    keep[pinned] = False
+    return (-laplacian[keep][:, keep]).tocsc(), keep
+
+
 def available_solvers() -> tuple[str, ...]:
-    """Names of the solver backends usable here, fastest first.
+    """Names of the solver backends usable here, in the order ``"auto"`` prefers them.
 
     Returns
     -------
     names : tuple of str
-        A subset of ``("cholmod", "scipy")``.
+        A subset of ``("cholmod", "eigen", "scipy")``.
     """
-    return ("cholmod", "scipy") if _cholmod() is not None else ("scipy",)
+    return tuple(name for name in _PREFERENCE if name != "cholmod" or _cholmod() is not None)
 
 
-def _factorize(matrix: sp.csc_matrix, solver: str) -> Callable[[np.ndarray], np.ndarray]:
-    """Factorise a symmetric positive definite matrix with the chosen backend."""
-    cholesky = _cholmod()
-    if solver == "cholmod" and cholesky is None:
-        raise MissingDependencyError(
-            "solver 'cholmod' needs a CHOLMOD binding: pip install 'cfsig[cholmod]'"
-        )
-    if solver != "scipy" and cholesky is not None:
+def factorize(matrix: sp.csc_matrix, solver: str) -> Callable[[np.ndarray], np.ndarray]:
+    """Factorise a symmetric positive definite matrix with the chosen backend.
+
+    Parameters
+    ----------
+    matrix : (k, k) scipy.sparse.csc_matrix
+        Symmetric positive definite, e.g. from `pinned_system`.
+    solver : {"auto", "cholmod", "eigen", "scipy"}
+        Backend, see `solve_laplacian`.
+
+    Returns
+    -------
+    solve : callable
+        Maps a right-hand side (k,) float64 to the solution (k,) float64.
+
+    Raises
+    ------
+    MissingDependencyError
+        ``solver="cholmod"`` and no CHOLMOD binding installed.
+    RuntimeError
+        The matrix is not positive definite (``"cholmod"`` and ``"eigen"``).
+    """
+    if solver == "auto":
+        solver = available_solvers()[0]
+    if solver == "cholmod":
+        cholesky = _cholmod()
+        if cholesky is None:
+            raise MissingDependencyError(
+                "solver 'cholmod' needs a CHOLMOD binding: pip install 'cfsig[cholmod]'"
+            )
         return cholesky(matrix).solve_A
+    if solver == "eigen":
+        return _eigen_cholesky(matrix)
     lu = spla.splu(matrix, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
     return lu.solve
+
+
+def _eigen_cholesky(matrix: sp.csc_matrix) -> Callable[[np.ndarray], np.ndarray]:
+    """Eigen's simplicial Cholesky (AMD ordering) through libigl's min_quad_with_fixed."""
+    import igl
+
+    # min_quad_with_fixed minimises z'Az/2 + z'B with no fixed values and no constraints, so
+    # A z = -B; it raises RuntimeError when A is not positive definite.
+    data = igl.min_quad_with_fixed_data()
+    no_rows = np.empty((0, 1))
+    constraints = sp.csc_matrix((0, matrix.shape[0]))
+    igl.min_quad_with_fixed_precompute(matrix, np.empty(0, np.int64), constraints, True, data)
+    return lambda b: igl.min_quad_with_fixed_solve(data, -b[:, None], no_rows, no_rows)[:, 0]
 
 
 def _cholmod() -> Callable | None:

@@ -19,3 +19,7 @@ class IndexFileError(CfsigError):
 
 class MissingDependencyError(CfsigError):
     """An optional dependency needed for the requested feature is not installed."""
+
+
+class ClusterError(CfsigError):
+    """A Dask cluster cannot be reached."""

@@ -30,10 +30,15 @@ def edge_lengths(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         ``lengths[f, j]`` is the length of the edge of face ``f`` opposite its corner ``j``,
         in the units of ``vertices``.
     """
-    corners = vertices[faces]
-    return np.stack(
-        [np.linalg.norm(corners[:, b] - corners[:, a], axis=1) for a, b in _OPPOSITE], axis=1
-    )
+    squared = np.zeros(faces.shape)
+    for coordinate in np.ascontiguousarray(vertices.T):
+        corner = coordinate[faces]
+        delta = np.empty_like(corner)
+        for j, (a, b) in enumerate(_OPPOSITE):
+            np.subtract(corner[:, b], corner[:, a], out=delta[:, j])
+        delta *= delta
+        squared += delta
+    return np.sqrt(squared, out=squared)
 
 
 def mollify(lengths: np.ndarray, factor: float) -> tuple[np.ndarray, float]:
@@ -106,13 +111,17 @@ def face_areas(lengths: np.ndarray) -> np.ndarray:
     areas : (m,) float64
         Areas in squared length units; 0 for triangles that violate the triangle inequality.
     """
-    s = -np.sort(-lengths, axis=1)
-    a, b, c = s.T
+    x, y, z = lengths.T
+    a = np.maximum(np.maximum(x, y), z)  # a >= b >= c, as Kahan's formula needs
+    b = np.maximum(np.minimum(x, y), np.minimum(np.maximum(x, y), z))
+    c = np.minimum(np.minimum(x, y), z)
     prod = (a + (b + c)) * (c - (a - b)) * (c + (a - b)) * (a + (b - c))
     return 0.25 * np.sqrt(np.maximum(prod, 0.0))
 
 
-def cotan_laplacian(lengths: np.ndarray, faces: np.ndarray, n_vertices: int) -> sp.csc_matrix:
+def cotan_laplacian(
+    lengths: np.ndarray, faces: np.ndarray, n_vertices: int, areas: np.ndarray | None = None
+) -> sp.csc_matrix:
     """The cotangent Laplacian (paper eq. 1, [HPW06]) of an intrinsic metric.
 
     Parameters
@@ -123,22 +132,52 @@ def cotan_laplacian(lengths: np.ndarray, faces: np.ndarray, n_vertices: int) -> 
         Triangles.
     n_vertices : int
         Number of vertices n.
+    areas : (m,) float64, optional
+        The faces' areas, `face_areas` of ``lengths``, when already known.
 
     Returns
     -------
     L : (n, n) scipy.sparse.csc_matrix, float64
         Symmetric, negative semidefinite, ``L[i, j] = (cot a + cot b) / 2`` for an edge ij and
         rows summing to zero; the same sign convention as libigl's ``cotmatrix``. Dimensionless.
+        An entry is stored for every edge, even of weight 0, and for every diagonal element, so
+        the pattern is the vertex adjacency plus the diagonal.
     """
+    if areas is None:
+        areas = face_areas(lengths)
     a2 = lengths * lengths
-    cot = (a2.sum(axis=1, keepdims=True) - 2 * a2) / (4 * face_areas(lengths))[:, None]
+    cot = (a2.sum(axis=1, keepdims=True) - 2 * a2) / (4 * areas)[:, None]
     rows = np.concatenate([faces[:, b] for b, _ in _OPPOSITE])
     cols = np.concatenate([faces[:, c] for _, c in _OPPOSITE])
     w = 0.5 * cot.T.ravel()
-    off = sp.coo_matrix((w, (rows, cols)), shape=(n_vertices, n_vertices))
-    off = off + off.T
-    diag = sp.diags(-np.asarray(off.sum(axis=1)).ravel())
-    return (off + diag).tocsc()
+    diag = -(np.bincount(rows, w, n_vertices) + np.bincount(cols, w, n_vertices))
+    every = np.arange(n_vertices)
+    # One assembly of both triangles and the diagonal; duplicates (an edge's two faces) are summed.
+    data = np.concatenate([w, w, diag])
+    ij = (np.concatenate([rows, cols, every]), np.concatenate([cols, rows, every]))
+    return sp.csc_matrix((data, ij), shape=(n_vertices, n_vertices))
+
+
+def edge_graph(faces: np.ndarray, n_vertices: int) -> sp.csr_matrix:
+    """The mesh's edges as a symmetric sparse matrix of face counts.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+        Triangles.
+    n_vertices : int
+        Number of vertices n.
+
+    Returns
+    -------
+    graph : (n, n) scipy.sparse.csr_matrix, float64
+        ``graph[i, j]`` is the number of faces that contain the edge ij: 1 on a boundary, 2 inside
+        a manifold, more on a non-manifold edge; no entry where there is no edge.
+    """
+    rows = faces.ravel()
+    cols = faces[:, [1, 2, 0]].ravel()
+    half = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_vertices, n_vertices))
+    return (half + half.T).tocsr()
 
 
 def edge_face_counts(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
@@ -154,34 +193,36 @@ def edge_face_counts(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np
     Returns
     -------
     edges : (e, 2) int64
-        Unique edges ``(i, j)`` with ``i < j``.
+        Unique edges ``(i, j)`` with ``i < j``, sorted.
     counts : (e,) int64
         Faces per edge: 1 on a boundary, 2 inside a manifold, more on a non-manifold edge.
     """
-    half = np.concatenate([faces[:, [b, c]] for b, c in _OPPOSITE])
-    half.sort(axis=1)
-    keys, counts = np.unique(half[:, 0] * n_vertices + half[:, 1], return_counts=True)
-    return np.stack([keys // n_vertices, keys % n_vertices], axis=1), counts
+    upper = sp.triu(edge_graph(faces, n_vertices), k=1, format="coo")
+    edges = np.stack([upper.row, upper.col], axis=1).astype(np.int64)
+    return edges, upper.data.astype(np.int64)
 
 
-def boundary_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+def boundary_vertices(faces: np.ndarray, laplacian: sp.spmatrix) -> np.ndarray:
     """Mark the vertices that lie on a boundary edge (an edge of one face only).
+
+    On a mesh with at most two faces per edge and one fan of faces per vertex (what `clean_mesh`
+    guarantees), a vertex is inside when its fan closes, with as many neighbours as faces, and
+    on the boundary when its fan is open, with one neighbour more than faces.
 
     Parameters
     ----------
     faces : (m, 3) int64
         Triangles.
-    n_vertices : int
-        Number of vertices n.
+    laplacian : (n, n) scipy.sparse.csc_matrix or csr_matrix
+        The mesh's `cotan_laplacian`, whose pattern holds each edge and the diagonal.
 
     Returns
     -------
     boundary : (n,) bool
     """
-    edges, counts = edge_face_counts(faces, n_vertices)
-    mask = np.zeros(n_vertices, dtype=bool)
-    mask[edges[counts == 1].ravel()] = True
-    return mask
+    n = laplacian.shape[0]
+    neighbours = np.diff(laplacian.indptr) - 1
+    return np.bincount(faces.ravel(), minlength=n) < neighbours
 
 
 def angle_defect(angles: np.ndarray, faces: np.ndarray, boundary: np.ndarray) -> np.ndarray:
@@ -225,15 +266,14 @@ def vertex_areas(areas: np.ndarray, faces: np.ndarray, n_vertices: int) -> np.nd
     return np.bincount(faces.ravel(), weights=np.repeat(areas / 3, 3), minlength=n_vertices)
 
 
-def components(faces: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
+def components(graph: sp.spmatrix) -> tuple[int, np.ndarray]:
     """Connected components of the mesh's vertex graph.
 
     Parameters
     ----------
-    faces : (m, 3) int64
-        Triangles.
-    n_vertices : int
-        Number of vertices n.
+    graph : (n, n) scipy.sparse matrix
+        Symmetric, with the vertex adjacency as its pattern (a diagonal does not matter): the
+        `cotan_laplacian` or the `edge_graph`.
 
     Returns
     -------
@@ -242,9 +282,6 @@ def components(faces: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
     labels : (n,) int32
         Component of each vertex, numbered from 0.
     """
-    rows = faces.ravel()
-    cols = np.roll(faces, 1, axis=1).ravel()
-    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_vertices, n_vertices))
     count, labels = connected_components(graph, directed=False)
     return int(count), labels
 

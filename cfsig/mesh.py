@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -156,8 +157,8 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
             f"but there are {len(vertices)} vertices"
         )
     repairs: list[str] = []
-    unique, inverse = np.unique(vertices, axis=0, return_inverse=True)
-    if len(unique) < len(vertices):
+    if _has_duplicate_rows(vertices + 0.0):  # + 0.0 turns -0.0 into 0.0, which compares equal
+        unique, inverse = np.unique(vertices, axis=0, return_inverse=True)
         repairs.append(f"merged {len(vertices) - len(unique)} coincident vertices")
         vertices, faces = unique, inverse.reshape(-1)[faces]
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2])
@@ -165,8 +166,9 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
     if repeated.any():
         repairs.append(f"dropped {int(repeated.sum())} faces that repeat a vertex")
         faces = faces[~repeated]
-    _, first = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
-    if len(first) < len(faces):
+    keys = _face_keys(faces, len(vertices))
+    if _has_duplicate_rows(keys):
+        _, first = np.unique(keys, axis=0, return_index=True)
         repairs.append(f"dropped {len(faces) - len(first)} duplicate faces")
         faces = faces[np.sort(first)]
     if len(faces) == 0:
@@ -229,36 +231,75 @@ def _fans(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """The smallest corner of the fan of every corner ``3f + j``, by pointer jumping."""
     corner = np.arange(faces.size)
     vertex = faces.ravel()
-    nxt = faces[:, [1, 2, 0]].ravel()  # half-edge 3f + j runs from corner 3f + j to the next
+    step = np.tile(np.array([1, 1, -2]), len(faces))  # from a corner to the next in its face
+    nxt = vertex[corner + step]  # half-edge 3f + j runs from corner 3f + j to the next
     keys = np.minimum(vertex, nxt) * n_vertices + np.maximum(vertex, nxt)
     order = np.argsort(keys)
     sorted_keys = keys[order]
-    starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
-    lengths = np.diff(np.r_[starts, len(keys)])
-    pair = starts[lengths == 2]  # edges of exactly two faces join fans; others break them
+    first, second = sorted_keys[0::2], sorted_keys[1::2]
+    closed = len(first) == len(second) and np.array_equal(first, second)
+    if closed and (first[1:] > second[:-1]).all():
+        a, b = order[0::2], order[1::2]  # every edge has exactly two faces
+    else:
+        closed = False
+        starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
+        lengths = np.diff(np.r_[starts, len(keys)])
+        pair = starts[lengths == 2]  # edges of exactly two faces join fans; others break them
+        a, b = order[pair], order[pair + 1]
     twin = corner.copy()
-    twin[order[pair]], twin[order[pair + 1]] = order[pair + 1], order[pair]
-    prev_edge = corner - corner % 3 + (corner + 2) % 3  # the half-edge ending at this corner
+    twin[a], twin[b] = b, a
 
     def at_vertex(half: np.ndarray) -> np.ndarray:
         """The corner at ``vertex`` of the face of each half-edge (orientation-agnostic)."""
-        following = half - half % 3 + (half + 1) % 3
-        return np.where(faces.ravel()[half] == vertex, half, following)
+        return np.where(vertex[half] == vertex, half, half + step[half])
 
-    forward, backward = at_vertex(twin), at_vertex(twin[prev_edge])
+    # Around a vertex, step to the face across the edge leaving the corner and across the edge
+    # ending at it; on a closed mesh every fan is a cycle and the first direction suffices.
+    hops = [at_vertex(twin)]
+    if not closed:
+        hops.append(at_vertex(twin[corner - np.roll(step, 1)]))
     label = corner
     while True:
-        new = np.minimum(label, np.minimum(label[forward], label[backward]))
+        new = label
+        for hop in hops:
+            new = np.minimum(new, label[hop])
         if np.array_equal(new, label):
             break
-        label, forward, backward = new, forward[forward], backward[backward]
+        label, hops = new, [hop[hop] for hop in hops]
     return label
+
+
+def _has_duplicate_rows(rows: np.ndarray) -> bool:
+    """Whether two rows of a 2-D array are bitwise equal (a hash of each row, then a sort)."""
+    bits = np.ascontiguousarray(rows).view(np.uint64)
+    hashes = bits[:, 0].copy()
+    for column in bits.T[1:]:
+        hashes = hashes * np.uint64(0x9E3779B97F4A7C15) ^ column
+    hashes.sort()
+    if not np.any(hashes[1:] == hashes[:-1]):
+        return False
+    return len(np.unique(rows, axis=0)) < len(rows)  # equal hashes: check the rows themselves
+
+
+def _face_keys(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """A row per face that is the same for every order of its vertices.
+
+    One integer per face when the indices fit in 21 bits each, else the sorted faces.
+    """
+    if n_vertices >= 1 << 21:
+        return np.sort(faces, axis=1)
+    a, b, c = faces.T
+    low, high = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+    return ((low << 42) | ((a + b + c - low - high) << 21) | high)[:, None]
 
 
 def _parse_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     """Parse OFF bytes (also COFF, NOFF and the like) into vertices and triangulated faces."""
     if b"#" in data:
         data = b"\n".join(line.split(b"#", 1)[0] for line in data.splitlines())
+    plain = _parse_plain_off(data)
+    if plain is not None:
+        return plain
     tokens = data.split()
     if not tokens[0].upper().endswith(b"OFF"):
         raise MeshError("not an OFF file (no OFF header)")
@@ -283,6 +324,40 @@ def _parse_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
         if np.all(tris[:, 0] == 3):
             return values[: 3 * n_v].reshape(-1, 3), _as_indices(tris[:, 1:])
     return _parse_off_lines(data, n_v, n_f)
+
+
+def _parse_plain_off(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
+    """Parse the common OFF layout fast, or return None to let the general parser decide.
+
+    The layout: "OFF" alone on the first line, the counts on the second, one vertex of three
+    coordinates per line, then only triangles. The vertex block ends at the n_v-th line break
+    after the counts: NumPy parses it as floats and the rest as integers, with no Python object
+    per number.
+    """
+    lines = np.flatnonzero(np.frombuffer(data, dtype=np.uint8) == ord("\n"))
+    if len(lines) < 2 or data[: lines[0]].strip().upper() != b"OFF":
+        return None
+    counts = data[lines[0] + 1 : lines[1]].split()
+    try:
+        n_v, n_f = int(counts[0]), int(counts[1])
+    except (IndexError, ValueError):
+        return None
+    if len(counts) != 3 or n_v < 3 or n_f < 1 or len(lines) < n_v + 2:
+        return None
+    start, split = lines[1] + 1, lines[n_v + 1] + 1
+    with warnings.catch_warnings():  # NumPy 1.x warns and stops early where 2.x raises
+        warnings.simplefilter("ignore", DeprecationWarning)
+        try:
+            vertices = np.fromstring(data[start:split], sep=" ")
+            faces = np.fromstring(data[split:], dtype=np.int64, sep=" ")
+        except ValueError:
+            return None
+    if len(vertices) != 3 * n_v or len(faces) != 4 * n_f:
+        return None
+    faces = faces.reshape(-1, 4)
+    if not np.all(faces[:, 0] == 3):
+        return None
+    return vertices.reshape(-1, 3), faces[:, 1:]
 
 
 def _parse_off_lines(data: bytes, n_v: int, n_f: int) -> tuple[np.ndarray, np.ndarray]:

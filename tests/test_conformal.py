@@ -38,13 +38,33 @@ def test_invariant_to_rigid_motion_and_scale():
     assert np.allclose(conformal_factor(clean_mesh(moved, f)).phi, base, atol=1e-8)
 
 
-@pytest.mark.skipif("cholmod" not in available_solvers(), reason="CHOLMOD binding not installed")
-def test_solvers_agree():
+@pytest.mark.parametrize("solver", available_solvers())
+def test_solvers_agree(solver):
     v, f = _bumpy()
     mesh = clean_mesh(v, f)
     a = conformal_factor(mesh, solver="scipy").phi
-    b = conformal_factor(mesh, solver="cholmod").phi
+    b = conformal_factor(mesh, solver=solver).phi
     assert np.allclose(a, b, atol=1e-9)
+
+
+def test_auto_is_the_first_available():
+    assert available_solvers()[-1] == "scipy" and "eigen" in available_solvers()
+    v, f = _bumpy()
+    mesh = clean_mesh(v, f)
+    auto = conformal_factor(mesh, solver="auto").phi
+    assert np.array_equal(auto, conformal_factor(mesh, solver=available_solvers()[0]).phi)
+
+
+def test_eigen_refuses_a_singular_system():
+    # Two spheres labelled as one component: one pinned vertex leaves the other sphere floating.
+    v, f = icosphere(2)
+    v2, f2 = np.vstack([v, v + 3]), np.vstack([f, f + len(v)])
+    lap = geometry.cotan_laplacian(geometry.edge_lengths(v2, f2), f2, len(v2))
+    rhs = np.random.default_rng(0).standard_normal(len(v2))
+    rhs[: len(v)] -= rhs[: len(v)].mean()
+    rhs[len(v) :] -= rhs[len(v) :].mean()
+    with pytest.raises(SolverError):
+        solve_laplacian(lap, rhs, np.zeros(len(v2), int), "eigen")
 
 
 def test_per_component_zero_mean():

@@ -1,6 +1,7 @@
 import igl
 import numpy as np
 import pytest
+import scipy.sparse as sp
 from conftest import disk, icosphere, open_cylinder, torus
 
 from cfsig import geometry
@@ -8,7 +9,7 @@ from cfsig import geometry
 
 def _curvature(v, f):
     lengths = geometry.edge_lengths(v, f)
-    boundary = geometry.boundary_vertices(f, len(v))
+    boundary = geometry.boundary_vertices(f, geometry.cotan_laplacian(lengths, f, len(v)))
     return geometry.angle_defect(geometry.corner_angles(lengths), f, boundary)
 
 
@@ -25,8 +26,10 @@ def test_gauss_bonnet(mesh, chi):
 def test_boundary_curvature_is_pi_minus_angles():
     v, f = disk()
     k = _curvature(v, f)
-    boundary = geometry.boundary_vertices(f, len(v))
+    lap = geometry.cotan_laplacian(geometry.edge_lengths(v, f), f, len(v))
+    boundary = geometry.boundary_vertices(f, lap)
     assert boundary.sum() == 32
+    assert np.array_equal(np.flatnonzero(boundary), np.arange(len(v) - 32, len(v)))  # the rim
     # A flat disk: interior vertices have zero curvature, the rim carries all of 2 pi.
     assert np.allclose(k[~boundary], 0, atol=1e-12)
     assert k[boundary].sum() == pytest.approx(2 * np.pi)
@@ -93,7 +96,7 @@ def test_components_and_target_curvature():
     v2, f2 = torus(nu=12, nv=6)
     v = np.vstack([v1, v2 + 5])
     f = np.vstack([f1, f2 + len(v1)])
-    count, labels = geometry.components(f, len(v))
+    count, labels = geometry.components(geometry.edge_graph(f, len(v)))
     assert count == 2
     k = _curvature(v, f)
     lengths = geometry.edge_lengths(v, f)
@@ -108,5 +111,17 @@ def test_components_and_target_curvature():
 
 def test_non_manifold_edges_are_counted():
     f = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
-    edges, counts = geometry.edge_face_counts(f, 5)
-    assert counts[(edges == [0, 1]).all(axis=1)][0] == 3
+    graph = geometry.edge_graph(f, 5)
+    assert graph[0, 1] == graph[1, 0] == 3
+    assert graph[0, 2] == graph[1, 2] == 1
+    assert graph.nnz == 2 * 7
+
+
+def test_laplacian_pattern_is_adjacency_plus_diagonal():
+    # boundary_vertices counts neighbours on the pattern: every edge must be stored, even with
+    # a weight of zero (here the squares' diagonals, opposite two right angles, nearly so).
+    v, f = open_cylinder()
+    lap = geometry.cotan_laplacian(geometry.edge_lengths(v, f), f, len(v))
+    pattern = (geometry.edge_graph(f, len(v)) + sp.identity(len(v))).tocsc()
+    assert np.array_equal(lap.indptr, pattern.indptr)
+    assert np.array_equal(lap.indices, pattern.indices)

@@ -35,7 +35,7 @@ def test_two_parts_touching_at_a_vertex_are_separated():
     glued_f = np.vstack([f1, remap[f2]])
     mesh = clean_mesh(glued_v, glued_f)
     assert any("non-manifold" in r for r in mesh.repairs)
-    assert geometry.components(mesh.faces, len(mesh.vertices))[0] == 2
+    assert geometry.components(geometry.edge_graph(mesh.faces, len(mesh.vertices)))[0] == 2
     apart = np.vstack([v1, v2 + [0.0, 0.0, 1e-3]]), np.vstack([f1, f2 + len(v1)])
     assert _l1(compute_signature(mesh, Params()).histogram, _sig(*apart)) < 1e-12
 

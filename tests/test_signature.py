@@ -93,3 +93,24 @@ def test_normalized_variant(body):
     cf = compute_signature(clean_mesh(*body), params)
     assert cf.histogram.sum() == pytest.approx(1.0)
     assert cf.histogram[0] > 0 and cf.histogram[-1] > 0  # min and max phi land in the end bins
+
+
+def test_samples_uniform_inside_a_triangle():
+    # phi = 3 (b1 + 2 b2) in barycentric coordinates: P(phi < 3) = P(b1 + 2 b2 < 1) = 1/2
+    faces = np.array([[0, 1, 2]])
+    samples = sample_phi(faces, np.array([1.0]), np.array([0.0, 3.0, 6.0]), 60_000, seed=1)
+    assert np.mean(samples < 3.0) == pytest.approx(0.5, abs=0.01)
+
+
+def test_samples_reproducible_and_seeded():
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    areas, phi = np.array([1.0, 2.0]), np.array([0.0, 1, 2, 3])
+    a = sample_phi(faces, areas, phi, 1000, seed=5)
+    assert np.array_equal(a, sample_phi(faces, areas, phi, 1000, seed=5))
+    assert not np.array_equal(a, sample_phi(faces, areas, phi, 1000, seed=6))
+
+
+def test_histogram_bin_edges_and_far_values():
+    params = Params(bins=4, low=0.0, high=4.0)
+    hist = histogram(np.array([-10.0, 0.0, 0.99, 1.0, 2.5, 3.99, 4.0, 1e30]), params)
+    assert np.array_equal(hist * 8, [3, 1, 1, 3])

@@ -1,0 +1,52 @@
+"""Helpers shared by the benchmark scripts: the data set, medians and Markdown tables."""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+from collections.abc import Sequence
+from pathlib import Path
+
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "shrec07"
+VERTEX_BINS = (0, 2_000, 5_000, 10_000, 20_000)
+
+
+def data_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the options that choose the meshes: a folder and a deterministic subset."""
+    parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="SHREC07 folder")
+    parser.add_argument(
+        "--every", type=int, default=1, help="take every k-th mesh in sorted order (default all)"
+    )
+
+
+def meshes(args: argparse.Namespace) -> list[Path]:
+    """The OFF files of the data folder, sorted by class then number, every k-th one."""
+    files = sorted(args.data.glob("*/*.off"), key=lambda p: (p.parent.name, int(p.stem)))
+    if not files:
+        raise SystemExit(f"no meshes under {args.data} (unpack SHREC07 or pass --data)")
+    return files[:: args.every]
+
+
+def median(values: Sequence[float]) -> float:
+    """The median of a non-empty sequence."""
+    return statistics.median(values)
+
+
+def vertex_bin(n: int) -> tuple[int, str]:
+    """The vertex-count bin that holds n: its lower edge (to sort by) and its label."""
+    lows = [low for low in VERTEX_BINS if low <= n]
+    low = lows[-1]
+    following = VERTEX_BINS[len(lows)] if len(lows) < len(VERTEX_BINS) else None
+    return low, f"{low // 1000}k+" if following is None else f"{low // 1000}-{following // 1000}k"
+
+
+def table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+    """A Markdown table; floats with three significant digits."""
+
+    def cell(value: object) -> str:
+        return f"{value:.3g}" if isinstance(value, float) else str(value)
+
+    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    lines += ["| " + " | ".join(map(cell, row)) + " |" for row in rows]
+    return "\n".join(lines)

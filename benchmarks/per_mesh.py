@@ -1,0 +1,148 @@
+"""Per-mesh time of cfsig, stage by stage, against the bare factorisation and solve alone.
+
+For every mesh and solver family, in one process with one BLAS/OpenMP thread: the end-to-end
+``signature_file`` (read, operators, solve, curvature error, sampling, histogram); the same
+stages timed one by one; and the bare factorisation and solve of the same pinned system, on its
+own. Prints Markdown tables of medians (CPU seconds from ``time.process_time``, wall seconds from
+``time.perf_counter``) and the ratio end to end / bare solve.
+
+    python benchmarks/per_mesh.py [--every K] [--solvers scipy cholmod] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import os
+
+# One BLAS/OpenMP thread, set before NumPy loads its libraries.
+os.environ.update(
+    dict.fromkeys(["OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"], "1")
+)
+
+import argparse
+import hashlib
+import json
+import time
+from collections import defaultdict
+from collections.abc import Callable
+from pathlib import Path
+
+import common
+import numpy as np
+
+from cfsig.conformal import (
+    ConformalFactor,
+    available_solvers,
+    curvature_error,
+    factorize,
+    operators,
+    pinned_system,
+    solve_laplacian,
+)
+from cfsig.mesh import parse_mesh, read_bytes
+from cfsig.params import Params
+from cfsig.signature import signature_file, signature_of
+
+STAGES = ("read", "operators", "solve", "curvature error", "sampling+histogram")
+
+
+def timed(func: Callable[[], object]) -> tuple[object, float, float]:
+    """Run ``func`` once: its result, CPU seconds and wall seconds."""
+    cpu, wall = time.process_time(), time.perf_counter()
+    result = func()
+    return result, time.process_time() - cpu, time.perf_counter() - wall
+
+
+def measure(path: Path, params: Params, solver: str) -> dict:
+    """End-to-end, per-stage and bare-solve times of one mesh with one solver family."""
+    row: dict = {"mesh": f"{path.parent.name}/{path.name}", "solver": solver}
+    sig, row["e2e_cpu"], row["e2e_wall"] = timed(lambda: signature_file(path, params, solver))
+    row["vertices"], row["curvature_error"] = sig.n_vertices, sig.curvature_error
+
+    def read():
+        data = read_bytes(path)
+        hashlib.sha256(data).hexdigest()
+        return parse_mesh(data, path)
+
+    stages = {}
+    mesh, *stages["read"] = timed(read)
+    ops, *stages["operators"] = timed(lambda: operators(mesh, params.mollify))
+    rhs = ops.target - ops.curvature
+    phi, *stages["solve"] = timed(lambda: solve_laplacian(ops.laplacian, rhs, ops.labels, solver))
+    error, *stages["curvature error"] = timed(
+        lambda: curvature_error(ops.lengths, mesh.faces, ops.boundary, phi, ops.target)
+    )
+    cf = ConformalFactor(phi, ops.curvature, ops.target, ops.face_areas, ops.n_components,
+                         ops.mollified, error)  # fmt: skip
+    hist, *stages["sampling+histogram"] = timed(lambda: signature_of(cf, mesh.faces, params))
+    assert np.array_equal(hist, sig.histogram), f"{path}: stages disagree with signature_file"
+    for stage, (cpu, wall) in stages.items():
+        row[f"{stage}_cpu"], row[f"{stage}_wall"] = cpu, wall
+
+    system, keep = pinned_system(ops.laplacian, ops.labels)
+    b = -rhs[keep]
+    _, row["bare_cpu"], row["bare_wall"] = timed(lambda: factorize(system, solver)(b))
+    row["ratio_cpu"] = row["e2e_cpu"] / row["bare_cpu"]
+    row["ratio_wall"] = row["e2e_wall"] / row["bare_wall"]
+    return row
+
+
+def report(rows: list[dict], solvers: list[str]) -> str:
+    """Markdown tables of the medians, per solver family and per vertex-count bin."""
+    med, out = common.median, []
+    by_solver = {s: [r for r in rows if r["solver"] == s] for s in solvers}
+    head = ["solver", "meshes", "end to end CPU s", "bare solve CPU s", "ratio (median)",
+            "ratio (max)", "ratio of totals", "end to end wall s", "bare wall s",
+            "ratio wall (median)"]  # fmt: skip
+    body = []
+    for s, rs in by_solver.items():
+        body.append([
+            s, len(rs), med([r["e2e_cpu"] for r in rs]), med([r["bare_cpu"] for r in rs]),
+            med([r["ratio_cpu"] for r in rs]), max(r["ratio_cpu"] for r in rs),
+            sum(r["e2e_cpu"] for r in rs) / sum(r["bare_cpu"] for r in rs),
+            med([r["e2e_wall"] for r in rs]), med([r["bare_wall"] for r in rs]),
+            med([r["ratio_wall"] for r in rs]),
+        ])  # fmt: skip
+    out += ["### End to end against the bare solve", "", common.table(head, body), ""]
+    head = ["solver", *(f"{stage} CPU s" for stage in STAGES), "max end to end CPU s"]
+    body = [
+        [s, *(med([r[f"{stage}_cpu"] for r in rs]) for stage in STAGES),
+         max(r["e2e_cpu"] for r in rs)]
+        for s, rs in by_solver.items()
+    ]  # fmt: skip
+    out += ["### Median CPU seconds per stage", "", common.table(head, body), ""]
+    bins: dict = defaultdict(list)
+    for r in rows:
+        bins[common.vertex_bin(r["vertices"]), r["solver"]].append(r)
+    head = ["vertices", "solver", "meshes", "end to end CPU s", "bare solve CPU s", "ratio"]
+    body = [
+        [label, s, len(rs), med([r["e2e_cpu"] for r in rs]), med([r["bare_cpu"] for r in rs]),
+         med([r["ratio_cpu"] for r in rs])]
+        for ((_, label), s), rs in sorted(bins.items())
+    ]  # fmt: skip
+    out += ["### By vertex count (medians)", "", common.table(head, body), ""]
+    errors = [r["curvature_error"] for r in by_solver[solvers[0]]]
+    out += [f"Curvature error (paper section 3.4, units of pi): median {med(errors):.3g}, "
+            f"max {max(errors):.3g}."]  # fmt: skip
+    return "\n".join(out)
+
+
+def main() -> None:
+    """Parse the options, measure every mesh with every solver family, print the tables."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    common.data_arguments(parser)
+    parser.add_argument("--solvers", nargs="+", default=["scipy", "eigen", "cholmod"])
+    parser.add_argument("--json", type=Path, help="also write every measurement here")
+    args = parser.parse_args()
+    solvers = [s for s in args.solvers if s in available_solvers()]
+    files, params = common.meshes(args), Params()
+    for s in solvers:  # warm up: imports and first-call costs are not per-mesh costs
+        measure(files[0], params, s)
+    rows = [measure(path, params, s) for path in files for s in solvers]
+    print(f"{len(files)} meshes from {args.data}, solvers {', '.join(solvers)}, one thread\n")
+    print(report(rows, solvers))
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,149 @@
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from conftest import icosphere, torus
+from crashing import signature_or_crash
+
+import cfsig
+from cfsig import batch
+from cfsig.batch import compute_many
+from cfsig.cli import main
+from cfsig.errors import ClusterError
+from cfsig.index import IndexReader
+from cfsig.params import Params
+from cfsig.signature import signature_file
+
+
+def _write_off(path: Path, v: np.ndarray, f: np.ndarray) -> Path:
+    lines = ["OFF", f"{len(v)} {len(f)} 0"]
+    lines += [" ".join(map(repr, map(float, p))) for p in v]
+    lines += ["3 " + " ".join(map(str, face)) for face in f]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.fixture
+def meshes(tmp_path):
+    """Five small meshes in two class folders, and one file that cannot be read."""
+    v, f = icosphere(2)
+    shapes = {
+        "round/a.off": (v, f),
+        "round/b.off": (v * [1, 0.8, 0.6], f),
+        "round/c.off": (v * [1.5, 1, 1], f),
+        "ring/d.off": torus(nu=24, nv=8),
+        "ring/e.off": torus(r=0.2, nu=24, nv=8),
+    }
+    for name, (verts, faces) in shapes.items():
+        (tmp_path / name).parent.mkdir(exist_ok=True)
+        _write_off(tmp_path / name, verts, faces)
+    (tmp_path / "ring" / "broken.off").write_text("OFF\n3 1 0\n0 0 0\n")
+    return tmp_path
+
+
+def _by_name(outcomes):
+    return {Path(o.path).name: o for o in outcomes}
+
+
+def test_a_crashing_worker_costs_only_its_file(meshes):
+    crash = meshes / "round" / "crash.off"
+    crash.write_bytes((meshes / "round" / "a.off").read_bytes())
+    paths = sorted(meshes.glob("*/*.off"))
+    outcomes = _by_name(compute_many(paths, Params(), jobs=2, compute=signature_or_crash))
+    assert sorted(outcomes) == sorted(p.name for p in paths)
+    assert "crashed" in outcomes["crash.off"].error
+    assert outcomes["broken.off"].signature is None and "truncated" in outcomes["broken.off"].error
+    for path in paths:
+        if path.name not in ("crash.off", "broken.off"):
+            expected = signature_file(path, Params()).histogram
+            assert np.array_equal(outcomes[path.name].signature.histogram, expected)
+
+
+def test_missing_scheduler_is_a_cluster_error(meshes, monkeypatch):
+    pytest.importorskip("distributed")
+    monkeypatch.setattr(batch, "_CONNECT_TIMEOUT", "1s")
+    with pytest.raises(ClusterError, match="cannot connect"):
+        list(compute_many([meshes / "round" / "a.off"], Params(), scheduler="tcp://127.0.0.1:9"))
+
+
+def _start(args: list[str], env: dict) -> subprocess.Popen:
+    """Start a Dask command in a process group of its own (a nanny and its worker die together)."""
+    return subprocess.Popen(
+        [sys.executable, "-m", *args], env=env, start_new_session=True,
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+
+
+def _stop(procs: list[subprocess.Popen]) -> None:
+    """Terminate the process groups, then kill what is left after a grace period."""
+    for proc in procs:
+        os.killpg(proc.pid, signal.SIGTERM)
+    for proc in procs:
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+
+
+@pytest.fixture
+def dask_cluster(tmp_path):
+    """A Dask scheduler and two one-thread workers, separate processes, all on loopback."""
+    pytest.importorskip("distributed")
+    env = dict(os.environ)
+    root = str(Path(cfsig.__file__).resolve().parents[1])
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
+    info = tmp_path / "scheduler.json"
+    local = ["--host", "127.0.0.1", "--dashboard-address", "127.0.0.1:0"]
+    procs = [_start(["distributed.cli.dask_scheduler", "--port", "0", *local,
+                     "--scheduler-file", str(info)], env)]  # fmt: skip
+    try:
+        deadline = time.monotonic() + 60
+        while not info.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        time.sleep(0.2)  # the file is written whole, but give the writer a moment
+        address = json.loads(info.read_text())["address"]
+        worker = ["distributed.cli.dask_worker", address, "--nthreads", "1", "--nanny-port", "0"]
+        procs += [_start([*worker, "--worker-port", "0", *local], env) for _ in range(2)]
+        from distributed import Client
+
+        with Client(address, timeout="30s") as client:
+            client.wait_for_workers(2, timeout=60)
+        yield address
+    finally:
+        _stop(procs)
+
+
+def test_dask_cluster_gives_the_local_results(meshes, dask_cluster):
+    paths = sorted(meshes.glob("*/*.off"))
+    remote = _by_name(compute_many(paths, Params(), scheduler=dask_cluster))
+    local = _by_name(compute_many(paths, Params(), jobs=1))
+    assert sorted(remote) == sorted(local) == sorted(p.name for p in paths)
+    assert remote["broken.off"].signature is None and "truncated" in remote["broken.off"].error
+    for name, outcome in local.items():
+        if outcome.signature is not None:
+            assert np.array_equal(remote[name].signature.histogram, outcome.signature.histogram)
+            assert np.array_equal(remote[name].signature.phi, outcome.signature.phi)
+
+    runner = CliRunner()
+    on_cluster = runner.invoke(main, ["index", str(meshes), "-o", str(meshes / "c.h5"),
+                                      "--scheduler", dask_cluster])  # fmt: skip
+    here = runner.invoke(main, ["index", str(meshes), "-o", str(meshes / "l.h5"), "-j", "1"])
+    assert on_cluster.exit_code == here.exit_code == 3  # the broken file is skipped
+    with IndexReader(meshes / "c.h5") as a, IndexReader(meshes / "l.h5") as b:
+        order_a, order_b = np.argsort(a.column("names")), np.argsort(b.column("names"))
+        assert list(a.column("names")[order_a]) == list(b.column("names")[order_b])
+        assert np.array_equal(a.signatures[:][order_a], b.signatures[:][order_b])
+
+
+def test_jobs_and_scheduler_are_exclusive(meshes):
+    result = CliRunner().invoke(main, ["index", str(meshes), "-o", str(meshes / "x.h5"),
+                                       "-j", "2", "--scheduler", "tcp://127.0.0.1:9"])  # fmt: skip
+    assert result.exit_code == 2 and "not both" in result.output
