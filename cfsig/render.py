@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CfsigError, MissingDependencyError
-from .geometry import components
+from .geometry import components, edge_graph
 from .mesh import Mesh, read_mesh
 
 CMAP = "turbo"
@@ -551,7 +551,7 @@ def _visible_faces(mesh: Mesh, toward: np.ndarray) -> np.ndarray:
         return faces  # open, non-manifold or inconsistently oriented: the z-buffer sorts it out
     corner = mesh.vertices[faces]
     normals = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
-    _, labels = components(faces, n)
+    _, labels = components(edge_graph(faces, n))
     component = labels[faces[:, 0]]
     volume = np.bincount(component, np.einsum("ij,ij->i", corner[:, 0], normals))
     outward = np.where(volume[component] < 0, -1.0, 1.0)
