@@ -7,7 +7,7 @@ line (a scheduler and a nanny with two one-thread workers, all on 127.0.0.1), no
 with Dask's default worker environment, one without its malloc setting. Each Dask index must
 hold the same signatures, bit for bit, as the local one. Needs the ``dask`` extra.
 
-    python benchmarks/index_jobs.py [--every K] [--repeat R] [--no-dask]
+    python benchmarks/index_jobs.py [--every K] [--repeat R] [--descriptor cf|cfhks] [--no-dask]
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ import numpy as np
 from cfsig.index import IndexReader
 
 COMMAND = "import sys; from cfsig.cli import main; sys.exit(main())"
+DESCRIPTOR: list[str] = []  # --descriptor, when given
 # Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_=65536, which also fixes glibc's mmap
 # threshold: every large NumPy temporary is then mapped and unmapped anew. Measured both ways.
 CLUSTERS = {
@@ -84,6 +85,8 @@ def start(args: list[str], env: dict) -> subprocess.Popen:
 def index(folder: Path, output: Path, *options: str) -> float:
     """Run ``cfsig index`` once; its wall seconds."""
     args = [sys.executable, "-c", COMMAND, "index", str(folder), "-o", str(output), *options]
+    if DESCRIPTOR:
+        args += ["--descriptor", DESCRIPTOR[0]]
     start = time.perf_counter()
     subprocess.run(args, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     return time.perf_counter() - start
@@ -110,7 +113,10 @@ def main() -> None:
     common.data_arguments(parser)
     parser.add_argument("--no-dask", action="store_true", help="skip the Dask cluster run")
     parser.add_argument("--repeat", type=int, default=3, help="runs of each kind (median)")
+    parser.add_argument("--descriptor", choices=["cf", "cfhks"], help="default: the command's")
     args = parser.parse_args()
+    if args.descriptor:
+        DESCRIPTOR.append(args.descriptor)
     files = common.meshes(args)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -141,7 +147,9 @@ def main() -> None:
     rows = [[mode, common.median(seconds)] for mode, seconds in runs.items()]
     base = rows[0][1]
     body = [[mode, seconds, len(files) / seconds, base / seconds] for mode, seconds in rows]
-    print(f"{len(files)} meshes from {args.data}, fresh index each run, median of {args.repeat}\n")
+    what = args.descriptor or "the command's default"
+    print(f"{len(files)} meshes from {args.data}, descriptor {what}, fresh index each run, "
+          f"median of {args.repeat}\n")  # fmt: skip
     print(common.table(["run", "wall s", "meshes per s", "speed-up over --jobs 1"], body))
     if not args.no_dask:
         print("\nEach Dask index holds the same signatures as the local one, bit for bit.")
