@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import threading
+import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -180,7 +182,9 @@ def _pool(jobs: int) -> ProcessPoolExecutor:
     os.environ.update(dict.fromkeys(_THREAD_VARS, "1"))
     try:
         ctx = multiprocessing.get_context("spawn")
-        pool = ProcessPoolExecutor(jobs, mp_context=ctx)
+        pool = ProcessPoolExecutor(
+            jobs, mp_context=ctx, initializer=_exit_with_parent, initargs=(os.getpid(),)
+        )
         # Each submit while no task has finished spawns a worker: all start with the variables.
         for future in [pool.submit(int) for _ in range(jobs)]:
             future.result()
@@ -191,3 +195,14 @@ def _pool(jobs: int) -> ProcessPoolExecutor:
             else:
                 os.environ[var] = value
     return pool
+
+
+def _exit_with_parent(parent: int) -> None:
+    """In a worker: exit as soon as the parent dies (killed batch jobs leave no orphans)."""
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True).start()

@@ -30,6 +30,27 @@ def _index_cmd(folder, index):
             "--commit-every", "1"]  # fmt: skip
 
 
+def _children(pid):
+    """Process ids whose parent is ``pid``."""
+    found = []
+    for stat in os.listdir("/proc"):
+        try:
+            fields = open(f"/proc/{stat}/stat").read().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if stat.isdigit() and int(fields[1]) == pid:
+            found.append(int(stat))
+    return found
+
+
+def _alive(pid):
+    try:
+        state = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
 def _rows(index):
     with IndexReader(index) as reader:
         return list(reader.column("names"))
@@ -42,11 +63,17 @@ def test_sigkill_mid_run_then_resume(meshes, tmp_path):
     for delay in (0.3, 0.6):  # two kills at different moments of the run
         proc = subprocess.Popen(_index_cmd(meshes, index), stderr=subprocess.DEVNULL)
         deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and len(_rows(index) if index.exists() else []) < 3:
+        target = len(committed_before) + 3  # this run has computed and committed some
+        while time.monotonic() < deadline and len(_rows(index) if index.exists() else []) < target:
             time.sleep(0.05)
         time.sleep(delay)
+        workers = _children(proc.pid)
         proc.send_signal(signal.SIGKILL)
         proc.wait()
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and any(map(_alive, workers)):
+            time.sleep(0.1)
+        assert workers and not any(map(_alive, workers))  # no orphaned worker keeps running
         names = _rows(index)  # the index opens after the kill
         assert len(names) == len(set(names)) and len(names) >= len(committed_before)
         assert names[: len(committed_before)] == committed_before  # nothing committed is lost
