@@ -23,7 +23,7 @@ bench: $(BIN)/python
 	$(BIN)/pip install -q -e '.[test,bench]'
 	$(BIN)/python benchmarks/retrieval.py
 
-# The figures of docs/performance.md (about half an hour on two cores).
+# The per-mesh and indexing figures of docs/performance.md (about 35 minutes on two cores).
 bench-perf: $(BIN)/python
 	$(BIN)/pip install -q -e '.[bench,cholmod,dask]'
 	$(BIN)/python benchmarks/per_mesh.py
