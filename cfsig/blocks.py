@@ -94,9 +94,11 @@ def read_block(dataset: h5py.Dataset, block: Block, buffer: np.ndarray) -> np.nd
     bins = dataset.shape[1]
     aligned = block.offset - block.offset % mmap.ALLOCATIONGRANULARITY
     skip = block.offset - aligned
+    # MAP_POPULATE (Linux) maps the pages in one call instead of one page fault per 4 KiB.
     view = mmap.mmap(
         dataset.file.id.get_vfd_handle(), skip + count * bins * _FLOAT32.itemsize,
-        access=mmap.ACCESS_READ, offset=aligned,
+        flags=mmap.MAP_SHARED | getattr(mmap, "MAP_POPULATE", 0), prot=mmap.PROT_READ,
+        offset=aligned,
     )  # fmt: skip
     return np.frombuffer(view, _FLOAT32, count * bins, skip).reshape(count, bins)
 
