@@ -21,7 +21,7 @@ from cfsig.params import Params
 @pytest.fixture(scope="module")
 def meshes(tmp_path_factory):
     folder = tmp_path_factory.mktemp("kill") / "meshes"
-    make_demo_collection(folder, per_class=4)
+    make_demo_collection(folder, per_class=10)
     return folder
 
 
@@ -60,7 +60,7 @@ def test_sigkill_mid_run_then_resume(meshes, tmp_path):
     index = tmp_path / "i.h5"
     total = len(list(meshes.rglob("*.off")))
     committed_before = []
-    for delay in (0.3, 0.6):  # two kills at different moments of the run
+    for delay in (0.2, 0.05):  # two kills at different moments of the run
         proc = subprocess.Popen(_index_cmd(meshes, index), stderr=subprocess.DEVNULL)
         deadline = time.monotonic() + 60
         target = len(committed_before) + 3  # this run has computed and committed some
