@@ -253,7 +253,7 @@ def mesh_and_signature(
         An OFF, OBJ, PLY or STL file.
     params : Params
         Signature parameters.
-    solver : {"auto", "scipy", "cholmod"}
+    solver : {"auto", "cholmod", "eigen", "scipy"}
         Sparse solver backend.
 
     Returns
