@@ -10,7 +10,7 @@ $(BIN)/python:
 	$(BIN)/python -m pip install -q --upgrade pip
 
 demo: $(BIN)/python
-	$(BIN)/pip install -q -e '.[cholmod,plots]'
+	$(BIN)/pip install -q -e '.[cholmod,fast,plots]'
 	$(BIN)/cfsig demo --out cfsig-demo
 
 test: $(BIN)/python

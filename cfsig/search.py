@@ -98,11 +98,12 @@ def nearest(reader: IndexReader, queries: np.ndarray, k: int) -> tuple[np.ndarra
         block_rows = max(b.stop - b.start for b in blocks)
         buffer = np.empty((block_rows, queries.shape[1]), np.float32)
         group = max(1, _OUT_CELLS // block_rows)
-        out = np.empty((min(group, len(queries)), block_rows), np.float32)
+        out = np.empty(min(group, len(queries)) * block_rows, np.float32)
         while (block := _next(todo, lock)) is not None:
             rows = read_block(reader.signatures, block, buffer)
             for q0 in range(0, len(queries), group):
-                dist = out[: len(queries[q0 : q0 + group]), : len(rows)]
+                count = len(queries[q0 : q0 + group])
+                dist = out[: count * len(rows)].reshape(count, len(rows))  # C-contiguous
                 kernel(queries[q0 : q0 + group], rows, dist)
                 with lock:
                     best.merge(q0, block.start, dist)

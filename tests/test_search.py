@@ -7,12 +7,12 @@ import cfsig.l1
 import cfsig.search
 from cfsig.blocks import plan_blocks, read_block
 from cfsig.index import Entry, IndexReader, IndexWriter
-from cfsig.l1 import choose_kernel, l1_numpy, numba_kernel
+from cfsig.l1 import choose_kernel, fast_kernel, l1_numpy
 from cfsig.params import Params
 from cfsig.search import nearest, search
 from cfsig.signature import Signature
 
-KERNELS = ["numpy", "numba"]
+KERNELS = ["numpy", "faiss"]
 
 
 def _histograms(n, seed, bins=200):
@@ -45,19 +45,19 @@ def _build(path, hists, chunk_rows, monkeypatch):
 @pytest.fixture(params=KERNELS)
 def kernel(request, monkeypatch):
     """Force one kernel on every scan."""
-    if request.param == "numba":
-        pytest.importorskip("numba")
-        monkeypatch.setattr(cfsig.l1, "NUMBA_MIN_WORK", 0)
+    if request.param == "faiss":
+        pytest.importorskip("faiss")
+        monkeypatch.setattr(cfsig.l1, "FAST_MIN_WORK", 0)
     else:
-        monkeypatch.setattr(cfsig.l1, "numba_kernel", lambda: None)
+        monkeypatch.setattr(cfsig.l1, "fast_kernel", lambda: None)
     return request.param
 
 
 @pytest.mark.parametrize("n_queries", [1, 3, 17])
-@pytest.mark.parametrize("n_rows", [1, 255, 256, 257, 700])
+@pytest.mark.parametrize("n_rows", [1, 255, 256, 257, 700, 2100])
 def test_kernels_match_brute_force(n_queries, n_rows):
     queries, rows = _histograms(n_queries, 1), _histograms(n_rows, 2)
-    kernels = [l1_numpy] + ([numba_kernel()] if numba_kernel() else [])
+    kernels = [l1_numpy] + ([fast_kernel()] if fast_kernel() else [])
     for kernel in kernels:
         out = np.full((n_queries, n_rows), -1.0, np.float32)
         kernel(queries, rows, out)
@@ -66,8 +66,17 @@ def test_kernels_match_brute_force(n_queries, n_rows):
 
 def test_kernel_choice(monkeypatch):
     assert choose_kernel(10) is l1_numpy
-    monkeypatch.setattr(cfsig.l1, "numba_kernel", lambda: None)
-    assert choose_kernel(10**12) is l1_numpy  # fallback when numba is missing
+    if fast_kernel() is not None:
+        assert choose_kernel(cfsig.l1.FAST_MIN_WORK) is fast_kernel()
+    monkeypatch.setattr(cfsig.l1, "fast_kernel", lambda: None)
+    assert choose_kernel(10**12) is l1_numpy  # fallback when faiss is missing
+
+
+def test_faiss_kernel_refuses_a_strided_output():
+    kernel = pytest.importorskip("cfsig.l1_faiss").l1_rows
+    out = np.zeros((2, 10), np.float32)[:, :5]
+    with pytest.raises(ValueError, match="contiguous"):
+        kernel(_histograms(2, 1), _histograms(5, 2), out)
 
 
 @pytest.mark.parametrize("k", [1, 5, 23, 60, 80])
