@@ -7,7 +7,8 @@ import sys
 import time
 from collections.abc import Callable
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import click
@@ -17,12 +18,19 @@ from . import __version__, render
 from .batch import compute_many
 from .conformal import SOLVERS
 from .errors import CfsigError
-from .evaluate import evaluate_distances, labels_from_cla, read_cla
+from .evaluate import (
+    Collection,
+    Evaluation,
+    collection_from_index,
+    compute_collection,
+    evaluate_collections,
+    read_cla,
+)
 from .index import Entry, IndexReader, IndexWriter
 from .mesh import find_meshes
 from .params import DESCRIPTORS, Params
 from .report import write_report
-from .search import l1_distances, search
+from .search import search
 from .signature import mesh_and_signature, signature_file
 
 EXIT_ERROR = 1
@@ -448,38 +456,33 @@ def evaluate(
     skipped: list[str] = []
     try:
         if index_file:
-            runs = dict([_index_run(index_file)])
+            collections = dict([collection_from_index(index_file)])
         else:
-            runs = {}
+            collections = {}
             for name in wanted:
                 params = _params(normalize=normalize, seed=seed, bins=bins, descriptor=name)
-                runs[name] = _compute_folder(folder, params, solver, jobs, strict, skipped)
+                collections[name] = _compute_folder(folder, params, solver, jobs, strict, skipped)
     except CfsigError as exc:
         _fail(str(exc))
-    common = set.intersection(*(set(run.names) for run in runs.values()))
-    reports, seconds = {}, {}
-    for name, run in runs.items():
-        labels = labels_from_cla(run.names, cla) if cla is not None else run.labels
-        pairs = enumerate(zip(run.names, labels, strict=True))
-        keep = [i for i, (n, label) in pairs if n in common and label]
-        distances = l1_distances(run.signatures[keep], run.signatures[keep])
-        try:
-            reports[name] = evaluate_distances(distances, [labels[i] for i in keep])
-        except ValueError as exc:
-            _fail(str(exc))
-        seconds[name] = float(np.median(run.seconds)) if len(run.seconds) else None
-    if len(runs) == 1:
-        ((name, report),) = reports.items()
+    try:
+        results = evaluate_collections(collections, cla)
+    except ValueError as exc:
+        _fail(str(exc))
+    if len(results) == 1:
+        (result,) = results.values()
+        report = result.report
         click.echo(json.dumps(report.to_dict(), indent=2) if as_json else _format_report(report))
-        if seconds[name] is not None and not as_json:
-            click.echo(f"median seconds per mesh: {seconds[name]:.3f}")
-        kept = [[column[i] for i in keep] for column in (run.names, labels, run.paths)]
-        _evaluate_pictures(plot, report_dir, report, kept, distances)
+        if result.seconds_per_mesh is not None and not as_json:
+            click.echo(f"median seconds per mesh: {result.seconds_per_mesh:.3f}")
+        _evaluate_pictures(plot, report_dir, result)
     elif as_json:
-        out = {n: {**r.to_dict(), "seconds_per_mesh": seconds[n]} for n, r in reports.items()}
+        out = {
+            name: {**r.report.to_dict(), "seconds_per_mesh": r.seconds_per_mesh}
+            for name, r in results.items()
+        }
         click.echo(json.dumps(out, indent=2))
     else:
-        click.echo(_format_side_by_side(reports, seconds))
+        click.echo(_format_side_by_side(results))
     _report_skipped(skipped, strict)
 
 
@@ -494,59 +497,28 @@ def _descriptor_list(text: str | None) -> list[str]:
     return names
 
 
-@dataclass(frozen=True)
-class _Run:
-    """The signatures of a collection for one descriptor, in file order."""
-
-    names: list[str]
-    labels: list[str]
-    paths: list[str]
-    signatures: np.ndarray
-    seconds: np.ndarray
-
-
-def _index_run(index_file: Path) -> tuple[str, _Run]:
-    """The descriptor and the signatures of an index (no timings)."""
-    with IndexReader(index_file) as reader:
-        columns = [list(reader.column(key)) for key in ("names", "labels", "paths")]
-        return reader.params.descriptor, _Run(*columns, reader.signatures[:], np.empty(0))
-
-
-def _compute_folder(folder: Path, params: Params, solver, jobs, strict, skipped: list[str]):
-    """The signatures of all meshes in a folder as a `_Run`; failures go to ``skipped``."""
-    found = dict(find_meshes([folder]))
-    sigs = {}
-    what = f"computing {params.descriptor}"
-    for outcome in _progress(compute_many(found, params, solver, jobs), len(found), what):
-        if outcome.error:
-            skipped.append(outcome.error)
-            if strict:
-                break
-        else:
-            sigs[outcome.path] = outcome.signature
-    order = [path for path in found if path in sigs]
-    if not order:
+def _compute_folder(
+    folder: Path, params: Params, solver: str, jobs, strict: bool, skipped: list[str]
+) -> Collection:
+    """A folder's collection under a progress bar; failures go to ``skipped``, exit if none."""
+    bar = partial(_progress, what=f"computing {params.descriptor}")
+    collection, failures = compute_collection(folder, params, solver, jobs, strict, bar)
+    skipped += failures
+    if not len(collection):
         _report_skipped(skipped, strict)
-        _fail(f"{folder}: no mesh files")
-    names = [found[p] for p in order]
-    return _Run(
-        names,
-        [Path(name).parent.name or folder.name for name in names],
-        [str(folder / name) for name in names],
-        np.array([sigs[p].histogram for p in order]),
-        np.array([sigs[p].seconds for p in order]),
-    )
+    return collection
 
 
-def _format_side_by_side(reports: dict, seconds: dict) -> str:
+def _format_side_by_side(results: dict[str, Evaluation]) -> str:
     """Several descriptors' measures, per-class first tier and seconds per mesh as text."""
+    reports = {name: result.report for name, result in results.items()}
     first = next(iter(reports.values()))
     keys = list(first.measures)
     lines = [f"{first.count} queries", f"{'descriptor':<16}" + "".join(f"{k:>8}" for k in keys)]
     lines[-1] += f"{'s/mesh':>9}"
     for name, report in reports.items():
         values = "".join(f"{report.measures[k]:8.3f}" for k in keys)
-        lines.append(f"{name:<16}{values}{seconds[name]:9.3f}")
+        lines.append(f"{name:<16}{values}{results[name].seconds_per_mesh:9.3f}")
     lines += ["first tier (FT) per class:", f"{'class':<16}" + "".join(f"{n:>8}" for n in reports)]
     for cls in sorted(first.per_class):
         lines.append(
@@ -647,12 +619,14 @@ def _query_picture(png: Path, meshes, results, classes: set[str]) -> None:
         _warn_undrawn(render.render_grid(rows, png))
 
 
-def _evaluate_pictures(plot, report_dir, report, kept: list[list], distances) -> None:
+def _evaluate_pictures(plot, report_dir, result: Evaluation) -> None:
     """The precision/recall plot and the HTML report of `evaluate`."""
+    report, kept = result.report, result.collection
+    columns = (kept.names, kept.labels, kept.paths)
     with _writing_pictures():
         if plot:
             render.plot_precision_recall(
                 report.class_precision_recall, report.precision_recall, plot
             )
         if report_dir:
-            _warn_undrawn(write_report(report_dir, report, *kept, distances))
+            _warn_undrawn(write_report(report_dir, report, *columns, result.distances))

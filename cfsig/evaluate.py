@@ -19,20 +19,33 @@ Benchmark", Shape Modeling International 2004):
 
 Overall measures are micro averages (mean over all queries, as in PSB); per-class measures
 average over the queries of one class.
+
+A `Collection` holds the signatures of labelled meshes for one descriptor, computed from a
+folder (`compute_collection`) or read from an index (`collection_from_index`);
+`evaluate_collections` evaluates one or several of them side by side on the same meshes.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from .batch import Outcome, compute_many
+from .errors import MeshError
+from .index import IndexReader
+from .mesh import find_meshes
+from .params import Params
+from .search import l1_distances
+from .signature import signature_length
+
 MEASURES = ("NN", "FT", "ST", "E", "DCG", "mAP")
 RECALL_LEVELS = np.arange(1, 21) / 20.0
 _E_DEPTH = 32
+Progress = Callable[[Iterator[Outcome], int], Iterable[Outcome]]
 
 
 @dataclass(frozen=True)
@@ -252,7 +265,7 @@ def read_cla(path: str | os.PathLike) -> dict[str, str]:
     return classes
 
 
-def labels_from_cla(names: Sequence[str], classes: dict[str, str]) -> list[str | None]:
+def labels_from_cla(names: Sequence[str], classes: Mapping[str, str]) -> list[str | None]:
     """Look up the class of mesh files in a `read_cla` mapping by their numeric id.
 
     A file's id is its stem (``17`` for ``human/17.off``), or the stem without a leading
@@ -262,7 +275,7 @@ def labels_from_cla(names: Sequence[str], classes: dict[str, str]) -> list[str |
     ----------
     names : sequence of str
         Mesh file names or paths.
-    classes : dict
+    classes : mapping of str to str
         Model id -> class name.
 
     Returns
@@ -272,3 +285,239 @@ def labels_from_cla(names: Sequence[str], classes: dict[str, str]) -> list[str |
     """
     stems = [Path(name).stem for name in names]
     return [classes.get(stem, classes.get(stem.removeprefix("m"))) for stem in stems]
+
+
+@dataclass(frozen=True)
+class Collection:
+    """The signatures of a labelled collection of meshes for one descriptor, in file order.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Length n: each mesh's name, its path relative to the collection's folder.
+    labels : tuple of str
+        Length n: each mesh's class, the name of the folder holding it.
+    paths : tuple of str
+        Length n: each mesh file.
+    signatures : np.ndarray
+        Shape (n, length), float: one signature per row.
+    seconds : np.ndarray or None
+        Shape (n,), seconds: wall time of each signature, reading included; None when the
+        signatures were not timed (read from an index).
+
+    Raises
+    ------
+    ValueError
+        If the attributes do not all hold one entry per mesh.
+    """
+
+    names: tuple[str, ...]
+    labels: tuple[str, ...]
+    paths: tuple[str, ...]
+    signatures: np.ndarray
+    seconds: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        """Check that every attribute has one entry per mesh."""
+        n = len(self.names)
+        timed = n if self.seconds is None else len(self.seconds)
+        sizes = {len(self.labels), len(self.paths), len(self.signatures), timed}
+        if sizes != {n} or self.signatures.ndim != 2:
+            raise ValueError(
+                f"a collection needs one name, label, path, signature row and time per mesh, "
+                f"got {n} names, {len(self.labels)} labels, {len(self.paths)} paths, "
+                f"signatures of shape {self.signatures.shape} and {timed} times"
+            )
+
+    def __len__(self) -> int:
+        """The number of meshes."""
+        return len(self.names)
+
+    def subset(self, rows: Sequence[int]) -> Collection:
+        """The meshes at some rows.
+
+        Parameters
+        ----------
+        rows : sequence of int
+            Length m: row numbers, in the order wanted.
+
+        Returns
+        -------
+        Collection
+            Of the m meshes.
+        """
+        rows = list(rows)
+        return Collection(
+            *(tuple(column[i] for i in rows) for column in (self.names, self.labels, self.paths)),
+            self.signatures[rows],
+            None if self.seconds is None else self.seconds[rows],
+        )
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """The retrieval measures of one collection and what they were computed from.
+
+    Attributes
+    ----------
+    report : RetrievalReport
+        The measures.
+    collection : Collection
+        The m meshes evaluated (those with a class, and common to all the collections evaluated
+        together), in file order, labelled with the classes the measures used.
+    distances : np.ndarray
+        Shape (m, m), float64: L1 distances between their signatures.
+    seconds_per_mesh : float or None
+        Median seconds per mesh over the whole collection given (not only the evaluated
+        meshes); None when it was not timed.
+    """
+
+    report: RetrievalReport
+    collection: Collection
+    distances: np.ndarray
+    seconds_per_mesh: float | None
+
+
+def compute_collection(
+    folder: str | os.PathLike,
+    params: Params,
+    solver: str = "auto",
+    jobs: int | None = None,
+    strict: bool = False,
+    progress: Progress | None = None,
+) -> tuple[Collection, list[str]]:
+    """Compute the signatures of all mesh files in a folder, each subfolder a class.
+
+    Files are found by `cfsig.mesh.find_meshes` and computed in spawned worker processes by
+    `cfsig.batch.compute_many` (in a script, call it under ``if __name__ == "__main__":``); a
+    file that fails is left out and reported.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        Walked recursively for OFF, OBJ, PLY and STL files. A mesh's label is the name of the
+        folder holding it (``folder``'s own name for files directly in it).
+    params : Params
+        Signature parameters, the descriptor included.
+    solver : {"auto", "cholmod", "eigen", "scipy"}
+        Sparse solver backend.
+    jobs : int, optional
+        Worker processes; default: the number of CPU cores.
+    strict : bool
+        Stop at the first file that fails (the collection then holds the files finished
+        before it).
+    progress : callable, optional
+        ``progress(outcomes, total)`` wraps the iterator of `cfsig.batch.Outcome` (``total``
+        files, in completion order) and yields the same outcomes, e.g. to show a progress bar.
+
+    Returns
+    -------
+    collection : Collection
+        The meshes computed, in file order, timed; empty (signatures of shape (0, length)) if
+        every file failed.
+    failures : list of str
+        One line per file that failed, ``<file>: <reason>``.
+
+    Raises
+    ------
+    MeshError
+        If the folder holds no mesh file.
+    """
+    folder = Path(folder)
+    found = dict(find_meshes([folder]))
+    if not found:
+        raise MeshError(f"{folder}: no mesh files")
+    outcomes = compute_many(found, params, solver, jobs)
+    signatures, failures = {}, []
+    for outcome in progress(outcomes, len(found)) if progress else outcomes:
+        if outcome.error:
+            failures.append(outcome.error)
+            if strict:
+                break
+        else:
+            signatures[outcome.path] = outcome.signature
+    order = [path for path in found if path in signatures]
+    names = tuple(found[path] for path in order)
+    rows = np.array([signatures[path].histogram for path in order])
+    collection = Collection(
+        names,
+        tuple(Path(name).parent.name or folder.name for name in names),
+        tuple(str(folder / name) for name in names),
+        rows.reshape(len(order), signature_length(params)),  # (0, length) if every file failed
+        np.array([signatures[path].seconds for path in order], dtype=float),
+    )
+    return collection, failures
+
+
+def collection_from_index(path: str | os.PathLike) -> tuple[str, Collection]:
+    """Read the signatures of an index as a collection.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The HDF5 index file.
+
+    Returns
+    -------
+    descriptor : str
+        The index's descriptor (``cf`` or ``cfhks``).
+    collection : Collection
+        All its meshes in index order, labelled as indexed, untimed (``seconds`` None).
+
+    Raises
+    ------
+    IndexFileError
+        If the index is missing, not HDF5, corrupt, not a cfsig index, or of a newer version.
+    """
+    with IndexReader(path) as reader:
+        columns = (tuple(reader.column(key)) for key in ("names", "labels", "paths"))
+        return reader.params.descriptor, Collection(*columns, reader.signatures[:])
+
+
+def evaluate_collections(
+    collections: Mapping[str, Collection], classes: Mapping[str, str] | None = None
+) -> dict[str, Evaluation]:
+    """Evaluate one or several collections side by side on the same meshes (leave-one-out, L1).
+
+    The meshes evaluated are those whose names are in every collection and that have a class,
+    so that the measures of several descriptors of one folder compare the same queries.
+
+    Parameters
+    ----------
+    collections : mapping of str to Collection
+        Descriptor (or any name) -> its collection.
+    classes : mapping of str to str, optional
+        Model id -> class name, as `read_cla` returns, replacing the collections' labels
+        (`labels_from_cla`: meshes whose id is absent are left out).
+
+    Returns
+    -------
+    dict of str to Evaluation
+        The same keys, in the same order.
+
+    Raises
+    ------
+    ValueError
+        If there is no collection, or the meshes evaluated leave no class with at least two
+        members (`evaluate_distances`).
+    """
+    if not collections:
+        raise ValueError("no collection to evaluate")
+    common = set.intersection(*(set(c.names) for c in collections.values()))
+    return {name: _evaluate(c, common, classes) for name, c in collections.items()}
+
+
+def _evaluate(
+    collection: Collection, common: set[str], classes: Mapping[str, str] | None
+) -> Evaluation:
+    """Evaluate the meshes of ``collection`` that are in ``common`` and have a class."""
+    labels = (
+        labels_from_cla(collection.names, classes) if classes is not None else collection.labels
+    )
+    pairs = enumerate(zip(collection.names, labels, strict=True))
+    keep = [i for i, (name, label) in pairs if name in common and label]
+    evaluated = replace(collection.subset(keep), labels=tuple(labels[i] for i in keep))
+    distances = l1_distances(evaluated.signatures, evaluated.signatures)
+    report = evaluate_distances(distances, evaluated.labels)
+    seconds = None if collection.seconds is None else float(np.median(collection.seconds))
+    return Evaluation(report, evaluated, distances, seconds)

@@ -1,4 +1,4 @@
-"""Tests for cfsig.evaluate: PSB retrieval measures and the .cla reader."""
+"""Tests for cfsig.evaluate: PSB retrieval measures, the .cla reader and collections."""
 
 import json
 import math
@@ -6,8 +6,24 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import icosphere, torus
+from test_index import _build
 
-from cfsig.evaluate import MEASURES, RetrievalReport, evaluate_distances, read_cla
+from cfsig.demo import write_off
+from cfsig.errors import IndexFileError, MeshError
+from cfsig.evaluate import (
+    MEASURES,
+    Collection,
+    RetrievalReport,
+    collection_from_index,
+    compute_collection,
+    evaluate_collections,
+    evaluate_distances,
+    read_cla,
+)
+from cfsig.index import IndexReader
+from cfsig.params import Params
+from cfsig.signature import signature_file
 
 SHREC07_CLA = Path("/work/shared/data/shrec07.cla")
 
@@ -224,3 +240,136 @@ def test_read_cla_shrec07():
     names, counts = np.unique(list(classes.values()), return_counts=True)
     assert len(names) == 20 and (counts == 20).all()
     assert classes["1"] == "human"
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    """Five small meshes in two class folders, one directly inside, and a broken file."""
+    root = tmp_path_factory.mktemp("collection") / "shapes"
+    (root / "round").mkdir(parents=True)
+    (root / "ring").mkdir()
+    v, f = icosphere(1)
+    for name, scale in zip("abc", ([1, 1, 1], [1, 0.8, 0.6], [1.5, 1, 1]), strict=True):
+        write_off(root / "round" / f"{name}.off", v * scale, f)
+    for name, r in (("d", 0.35), ("e", 0.2)):
+        write_off(root / "ring" / f"{name}.off", *torus(r=r, nu=16, nv=6))
+    write_off(root / "loose.off", v * [1, 1, 2], f)
+    (root / "ring" / "broken.off").write_text("OFF\n3 1 0\n0 0 0\n")
+    return root
+
+
+@pytest.fixture(scope="module")
+def computed(folder):
+    """The cf collection of ``folder``, its failures and what the progress callback saw."""
+    seen = []
+
+    def progress(outcomes, total):
+        for outcome in outcomes:
+            seen.append((total, outcome.path.name))
+            yield outcome
+
+    collection, failures = compute_collection(folder, Params(), jobs=1, progress=progress)
+    return collection, failures, seen
+
+
+def test_compute_collection_in_file_order_with_folder_labels(folder, computed):
+    collection, failures, seen = computed
+    names = ("loose.off", "ring/d.off", "ring/e.off", "round/a.off", "round/b.off", "round/c.off")
+    assert collection.names == names
+    assert collection.labels == ("shapes", "ring", "ring", "round", "round", "round")
+    assert collection.paths == tuple(str(folder / name) for name in names)
+    assert collection.signatures.shape == (6, Params().bins)
+    expected = signature_file(folder / "round" / "b.off", Params(), "auto").histogram
+    assert np.array_equal(collection.signatures[4], expected)
+    assert collection.seconds.shape == (6,) and (collection.seconds > 0).all()
+    assert len(failures) == 1 and failures[0].startswith(f"{folder / 'ring' / 'broken.off'}: ")
+    files = [Path(name).name for name in names] + ["broken.off"]
+    assert sorted(seen) == sorted((7, name) for name in files)
+
+
+def test_compute_collection_every_file_failing(tmp_path):
+    for name in ("x.off", "y.off"):
+        (tmp_path / "a" / name).parent.mkdir(exist_ok=True)
+        (tmp_path / "a" / name).write_text("OFF\n")
+    collection, failures = compute_collection(tmp_path, Params(bins=50), jobs=1)
+    assert len(collection) == 0 and collection.signatures.shape == (0, 50)
+    assert [line.split(":")[0] for line in failures] == [
+        str(tmp_path / "a" / "x.off"),
+        str(tmp_path / "a" / "y.off"),
+    ]
+    _, failures = compute_collection(tmp_path, Params(bins=50), jobs=1, strict=True)
+    assert len(failures) == 1
+
+
+def test_compute_collection_empty_folder(tmp_path):
+    (tmp_path / "notes.txt").write_text("no meshes here")
+    with pytest.raises(MeshError, match="no mesh files"):
+        compute_collection(tmp_path, Params())
+
+
+def test_collection_from_index(tmp_path):
+    hists = _build(tmp_path / "i.h5", 5, Params(descriptor="cf"))
+    descriptor, collection = collection_from_index(tmp_path / "i.h5")
+    assert descriptor == "cf" and collection.seconds is None
+    assert collection.names == tuple(f"c{i % 3}/{i}.off" for i in range(5))
+    assert collection.labels == tuple(f"c{i % 3}" for i in range(5))
+    assert collection.paths == tuple(f"/data/c{i % 3}/{i}.off" for i in range(5))
+    with IndexReader(tmp_path / "i.h5") as reader:
+        assert np.array_equal(collection.signatures, reader.signatures[:])
+    assert np.allclose(collection.signatures, hists, atol=1e-7)
+    with pytest.raises(IndexFileError):
+        collection_from_index(tmp_path / "missing.h5")
+
+
+def _collection(names, labels, seed, seconds=None) -> Collection:
+    """Random histograms for some names; timed when ``seconds`` is given."""
+    rows = np.random.default_rng(seed).random((len(names), 8))
+    seconds = None if seconds is None else np.asarray(seconds, float)
+    paths = tuple(f"/m/{name}" for name in names)
+    return Collection(
+        tuple(names), tuple(labels), paths, rows / rows.sum(1, keepdims=True), seconds
+    )
+
+
+def test_evaluate_collections_on_the_common_labelled_meshes():
+    first = _collection(["a1", "a2", "b1", "b2", "b3", "x"], "aabbbz", 1, [1, 2, 3, 4, 5, 60])
+    second = _collection(["b3", "a1", "b1", "a2", "b2"], "baaab", 2)  # no "x", other order
+    results = evaluate_collections({"one": first, "two": second})
+    assert list(results) == ["one", "two"]
+    one, two = results["one"], results["two"]
+    assert one.collection.names == ("a1", "a2", "b1", "b2", "b3")
+    assert two.collection.names == ("b3", "a1", "b1", "a2", "b2")
+    assert two.collection.labels == tuple("baaab")
+    rows = first.signatures[:5]
+    expected = np.abs(rows[:, None, :] - rows[None, :, :]).sum(axis=2)
+    assert np.allclose(one.distances, expected, atol=1e-6)
+    report = evaluate_distances(one.distances, list("aabbb"))
+    assert one.report.measures == report.measures and one.report.count == 5
+    assert one.seconds_per_mesh == 3.5  # over the whole collection, "x" included
+    assert two.seconds_per_mesh is None
+
+
+def test_evaluate_collections_with_classes_from_a_cla_mapping():
+    collection = _collection(["m1", "2", "3", "4", "5"], "zzzzz", 3)
+    classes = {"1": "p", "2": "p", "4": "q", "5": "q"}  # "3" has no class
+    (result,) = evaluate_collections({"cf": collection}, classes).values()
+    assert result.collection.names == ("m1", "2", "4", "5")
+    assert result.collection.labels == ("p", "p", "q", "q")
+    assert set(result.report.per_class) == {"p", "q"} and result.report.count == 4
+
+
+def test_evaluate_collections_errors():
+    with pytest.raises(ValueError, match="no collection"):
+        evaluate_collections({})
+    disjoint = _collection(["a", "b"], "cc", 4), _collection(["d", "e"], "cc", 5)
+    with pytest.raises(ValueError, match="at least two members"):
+        evaluate_collections(dict(zip("xy", disjoint, strict=True)))
+
+
+def test_collection_columns_must_agree():
+    with pytest.raises(ValueError, match="one name, label, path"):
+        Collection(("a", "b"), ("c",), ("/a", "/b"), np.zeros((2, 4)))
+    with pytest.raises(ValueError, match="one name, label, path"):
+        Collection(("a",), ("c",), ("/a",), np.zeros((1, 4)), np.ones(2))
+    sub = _collection(["a", "b", "c"], "xyz", 6, [1, 2, 3]).subset([2, 0])
+    assert sub.names == ("c", "a") and sub.labels == ("z", "x") and list(sub.seconds) == [3, 1]
