@@ -451,8 +451,10 @@ def evaluate(
         raise click.UsageError("--plot and --report take one descriptor")
     try:
         cla = read_cla(classes) if classes else None
-    except (OSError, ValueError) as exc:
-        _fail(f"{classes}: {exc}")
+    except OSError as exc:
+        _fail(f"{classes}: {exc.strerror or exc}")
+    except ValueError as exc:  # names the file and line already
+        _fail(str(exc))
     skipped: list[str] = []
     try:
         if index_file:
@@ -467,7 +469,7 @@ def evaluate(
     try:
         results = evaluate_collections(collections, cla)
     except ValueError as exc:
-        _fail(str(exc))
+        _fail(f"{index_file or folder}: {exc}")
     if len(results) == 1:
         (result,) = results.values()
         report = result.report

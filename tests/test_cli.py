@@ -143,6 +143,27 @@ def test_evaluate_folder_index_and_cla(collection, built_index, tmp_path):
     assert "FT" in text.output and "torus" in text.output
 
 
+def test_evaluate_class_file_errors_name_the_file_once(built_index, tmp_path):
+    missing = tmp_path / "missing.cla"
+    result = _run("evaluate", "--index", built_index, "--classes", missing)
+    assert result.exit_code == 1
+    assert result.output.strip() == f"Error: {missing}: No such file or directory"
+    bad = tmp_path / "bad.cla"
+    bad.write_text("not a class file\n")
+    result = _run("evaluate", "--index", built_index, "--classes", bad)
+    assert result.exit_code == 1 and result.output.count(str(bad)) == 1
+    # every mesh in a class of its own: nothing to retrieve, and the message names the index
+    names = sorted(p for p in h5py.File(built_index, "r")["names"].asstr()[:])
+    lines = ["PSB 1", f"{len(names)} {len(names)}"]
+    for i, name in enumerate(names):
+        lines += ["", f"c{i} 0 1", name.split("/")[-1].removesuffix(".off")]
+    alone = tmp_path / "alone.cla"
+    alone.write_text("\n".join(lines) + "\n")
+    result = _run("evaluate", "--index", built_index, "--classes", alone)
+    assert result.exit_code == 1
+    assert result.output.startswith(f"Error: {built_index}: no class has at least two members")
+
+
 def test_demo_command(tmp_path):
     result = _run("demo", "--out", tmp_path)
     assert result.exit_code == 0, result.output
