@@ -7,6 +7,8 @@ curvature error (paper section 3.4). Edge ``j`` of a face is the edge opposite i
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
@@ -65,7 +67,7 @@ def mollify(lengths: np.ndarray, factor: float) -> tuple[np.ndarray, float]:
     if factor <= 0 or len(lengths) == 0:
         return lengths, 0.0
     eps = factor * float(lengths.mean())
-    slack = lengths.sum(axis=1, keepdims=True) - 2 * lengths
+    slack = _row_sums(lengths) - 2 * lengths
     delta = max(0.0, float((eps - slack).max()))
     return (lengths + delta, delta) if delta > 0 else (lengths, 0.0)
 
@@ -119,8 +121,60 @@ def face_areas(lengths: np.ndarray) -> np.ndarray:
     return 0.25 * np.sqrt(np.maximum(prod, 0.0))
 
 
+@dataclass(frozen=True)
+class Edges:
+    """The undirected edges of a triangle mesh and the half-edges on each, from one sort.
+
+    Half-edge ``3f + j`` runs from corner ``j`` of face ``f`` to its corner ``(j + 1) % 3``: it is
+    the edge opposite corner ``(j + 2) % 3``.
+
+    Attributes
+    ----------
+    ends : (e, 2) int64
+        Each edge's vertices ``(i, j)`` with ``i < j``; the rows are sorted.
+    order : (3m,) int64
+        The half-edges sorted by edge.
+    starts : (e + 1,) int64
+        Edge ``k`` is made of the half-edges ``order[starts[k]:starts[k + 1]]``, one per face
+        that contains it.
+    """
+
+    ends: np.ndarray
+    order: np.ndarray
+    starts: np.ndarray
+
+
+def mesh_edges(faces: np.ndarray, n_vertices: int) -> Edges:
+    """Find the undirected edges of a triangle mesh by sorting its half-edges.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+        Triangles.
+    n_vertices : int
+        Number of vertices n.
+
+    Returns
+    -------
+    edges : Edges
+    """
+    start = faces.ravel()
+    end = faces[:, [1, 2, 0]].ravel()
+    low, high = np.minimum(start, end), np.maximum(start, end)
+    keys = low * n_vertices + high
+    order = np.argsort(keys)
+    sorted_keys = keys[order]
+    starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1], True])
+    first = order[starts[:-1]]
+    return Edges(np.stack([low[first], high[first]], axis=1), order, starts)
+
+
 def cotan_laplacian(
-    lengths: np.ndarray, faces: np.ndarray, n_vertices: int, areas: np.ndarray | None = None
+    lengths: np.ndarray,
+    faces: np.ndarray,
+    n_vertices: int,
+    areas: np.ndarray | None = None,
+    edges: Edges | None = None,
 ) -> sp.csc_matrix:
     """The cotangent Laplacian (paper eq. 1, [HPW06]) of an intrinsic metric.
 
@@ -134,6 +188,8 @@ def cotan_laplacian(
         Number of vertices n.
     areas : (m,) float64, optional
         The faces' areas, `face_areas` of ``lengths``, when already known.
+    edges : Edges, optional
+        The faces' `mesh_edges`, when already known.
 
     Returns
     -------
@@ -141,21 +197,51 @@ def cotan_laplacian(
         Symmetric, negative semidefinite, ``L[i, j] = (cot a + cot b) / 2`` for an edge ij and
         rows summing to zero; the same sign convention as libigl's ``cotmatrix``. Dimensionless.
         An entry is stored for every edge, even of weight 0, and for every diagonal element, so
-        the pattern is the vertex adjacency plus the diagonal.
+        the pattern is the vertex adjacency plus the diagonal; row indices are sorted.
     """
     if areas is None:
         areas = face_areas(lengths)
+    if edges is None:
+        edges = mesh_edges(faces, n_vertices)
     a2 = lengths * lengths
-    cot = (a2.sum(axis=1, keepdims=True) - 2 * a2) / (4 * areas)[:, None]
+    half_cot = 0.5 * ((_row_sums(a2) - 2 * a2) / (4 * areas)[:, None])
     rows = np.concatenate([faces[:, b] for b, _ in _OPPOSITE])
     cols = np.concatenate([faces[:, c] for _, c in _OPPOSITE])
-    w = 0.5 * cot.T.ravel()
+    w = half_cot.T.ravel()
     diag = -(np.bincount(rows, w, n_vertices) + np.bincount(cols, w, n_vertices))
-    every = np.arange(n_vertices)
-    # One assembly of both triangles and the diagonal; duplicates (an edge's two faces) are summed.
-    data = np.concatenate([w, w, diag])
-    ij = (np.concatenate([rows, cols, every]), np.concatenate([cols, rows, every]))
-    return sp.csc_matrix((data, ij), shape=(n_vertices, n_vertices))
+    # Half-edge 3f + j is opposite corner (j + 2) % 3; an edge's weight sums its half-edges'.
+    per_half_edge = half_cot[:, [2, 0, 1]].ravel()[edges.order]
+    if len(per_half_edge) == 2 * len(edges.ends) and np.all(np.diff(edges.starts) == 2):
+        weight = per_half_edge[0::2] + per_half_edge[1::2]  # closed: two faces on every edge
+    else:
+        weight = np.add.reduceat(per_half_edge, edges.starts[:-1])
+    return _symmetric_csc(edges.ends, weight, diag, n_vertices)
+
+
+def _symmetric_csc(ends: np.ndarray, weight: np.ndarray, diag: np.ndarray, n: int) -> sp.csc_matrix:
+    """The symmetric (n, n) CSC matrix of sorted edges' weights and a diagonal, laid out."""
+    low, high = ends[:, 0], ends[:, 1]
+    below = np.bincount(low, minlength=n)  # entries under the diagonal, per column
+    above = np.bincount(high, minlength=n)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(below + above + 1, out=indptr[1:])
+    # Column j holds its entries above the diagonal, the diagonal, then those below. The edges,
+    # sorted by (low, high), are already the part below; the part above is its transpose,
+    # reordered by SciPy's linear counting sort.
+    upper = sp.csr_matrix((weight, high, np.r_[0, np.cumsum(below)]), shape=(n, n)).tocsc()
+    every, rank = np.arange(n), np.arange(len(low))
+    start_above = upper.indptr[:-1]
+    start_below = indptr[:-1] - start_above - every
+    diagonal = indptr[:-1] + above
+    nnz = int(indptr[-1])
+    index_type = np.int32 if nnz < 2**31 else np.int64
+    indices, data = np.empty(nnz, dtype=index_type), np.empty(nnz)
+    where_above = rank + np.repeat(indptr[:-1] - start_above, above)
+    where_below = rank + np.repeat(diagonal + 1 - start_below, below)
+    indices[where_above], data[where_above] = upper.indices, upper.data
+    indices[where_below], data[where_below] = high, weight
+    indices[diagonal], data[diagonal] = every, diag
+    return sp.csc_matrix((data, indices, indptr.astype(index_type)), shape=(n, n))
 
 
 def edge_graph(faces: np.ndarray, n_vertices: int) -> sp.csr_matrix:
@@ -197,9 +283,8 @@ def edge_face_counts(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np
     counts : (e,) int64
         Faces per edge: 1 on a boundary, 2 inside a manifold, more on a non-manifold edge.
     """
-    upper = sp.triu(edge_graph(faces, n_vertices), k=1, format="coo")
-    edges = np.stack([upper.row, upper.col], axis=1).astype(np.int64)
-    return edges, upper.data.astype(np.int64)
+    edges = mesh_edges(faces, n_vertices)
+    return edges.ends, np.diff(edges.starts)
 
 
 def boundary_vertices(faces: np.ndarray, laplacian: sp.spmatrix) -> np.ndarray:
@@ -311,3 +396,8 @@ def target_curvature(
     total_k = np.bincount(labels, weights=curvature)
     total_a = np.bincount(labels, weights=vertex_area)
     return total_k[labels] * vertex_area / total_a[labels]
+
+
+def _row_sums(values: np.ndarray) -> np.ndarray:
+    """Sums of the three columns as an (m, 1) column, added left to right like ``sum(axis=1)``."""
+    return (values[:, 0] + values[:, 1] + values[:, 2])[:, None]

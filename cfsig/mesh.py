@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import MeshError, MissingDependencyError
+from .geometry import Edges, mesh_edges
 
 MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
 
@@ -27,11 +28,15 @@ class Mesh:
         Triangles with three distinct in-range indices, no face repeated.
     repairs : tuple of str
         What was repaired on reading, in words (empty for a clean mesh).
+    edges : geometry.Edges or None
+        The faces' `geometry.mesh_edges`, kept from the non-manifold check of `clean_mesh` so
+        that the Laplacian need not sort the half-edges again; None when not known.
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     repairs: tuple[str, ...] = ()
+    edges: Edges | None = None
 
 
 def read_mesh(path: str | os.PathLike) -> Mesh:
@@ -179,14 +184,17 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
         repairs.append(f"removed {int((~used).sum())} unreferenced vertices")
         remap = np.cumsum(used) - 1
         vertices, faces = vertices[used], remap[faces]
-    split_faces, copies = split_nonmanifold(faces, len(vertices))
+    edges = mesh_edges(faces, len(vertices))
+    split_faces, copies = split_nonmanifold(faces, len(vertices), edges)
     if len(copies):
         repairs.append(f"split {len(np.unique(copies))} non-manifold vertices into separate sheets")
-        vertices, faces = np.vstack([vertices, vertices[copies]]), split_faces
-    return Mesh(vertices, faces, tuple(repairs))
+        vertices, faces, edges = np.vstack([vertices, vertices[copies]]), split_faces, None
+    return Mesh(vertices, faces, tuple(repairs), edges)
 
 
-def split_nonmanifold(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+def split_nonmanifold(
+    faces: np.ndarray, n_vertices: int, edges: Edges | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Give each sheet of faces around a vertex its own copy of that vertex.
 
     The faces around a vertex form fans: maximal sequences of faces joined through edges that
@@ -202,6 +210,8 @@ def split_nonmanifold(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, n
         Triangles over ``n_vertices`` vertices, all referenced.
     n_vertices : int
         Number of vertices n.
+    edges : geometry.Edges, optional
+        The faces' `geometry.mesh_edges`, when already known.
 
     Returns
     -------
@@ -210,7 +220,7 @@ def split_nonmanifold(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, n
     copies : (k,) int64
         For each new vertex ``n + i``, the vertex it copies.
     """
-    fan = _fans(faces, n_vertices)
+    fan = _fans(faces, edges if edges is not None else mesh_edges(faces, n_vertices))
     roots = fan == np.arange(fan.size)
     if np.count_nonzero(roots) == n_vertices:
         return faces, np.empty(0, dtype=np.int64)
@@ -227,26 +237,16 @@ def split_nonmanifold(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, n
     return new_id[fan].reshape(faces.shape), fan_vertex[extra]
 
 
-def _fans(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+def _fans(faces: np.ndarray, edges: Edges) -> np.ndarray:
     """The smallest corner of the fan of every corner ``3f + j``, by pointer jumping."""
     corner = np.arange(faces.size)
     vertex = faces.ravel()
     step = np.tile(np.array([1, 1, -2]), len(faces))  # from a corner to the next in its face
-    nxt = vertex[corner + step]  # half-edge 3f + j runs from corner 3f + j to the next
-    keys = np.minimum(vertex, nxt) * n_vertices + np.maximum(vertex, nxt)
-    order = np.argsort(keys)
-    sorted_keys = keys[order]
-    first, second = sorted_keys[0::2], sorted_keys[1::2]
-    closed = len(first) == len(second) and np.array_equal(first, second)
-    if closed and (first[1:] > second[:-1]).all():
-        a, b = order[0::2], order[1::2]  # every edge has exactly two faces
-    else:
-        closed = False
-        starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
-        lengths = np.diff(np.r_[starts, len(keys)])
-        pair = starts[lengths == 2]  # edges of exactly two faces join fans; others break them
-        a, b = order[pair], order[pair + 1]
-    twin = corner.copy()
+    counts = np.diff(edges.starts)
+    closed = bool(np.all(counts == 2))
+    pair = edges.starts[:-1] if closed else edges.starts[:-1][counts == 2]
+    a, b = edges.order[pair], edges.order[pair + 1]  # edges of two faces join fans; others break
+    twin = corner.copy()  # half-edge 3f + j runs from corner 3f + j to the next
     twin[a], twin[b] = b, a
 
     def at_vertex(half: np.ndarray) -> np.ndarray:
@@ -258,14 +258,17 @@ def _fans(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     hops = [at_vertex(twin)]
     if not closed:
         hops.append(at_vertex(twin[corner - np.roll(step, 1)]))
+    # After r rounds each label is the minimum over 2^r consecutive corners of its fan (in both
+    # directions when open), so r with 2^r >= the most corners at a vertex covers every fan.
+    rounds = (int(np.bincount(vertex).max()) - 1).bit_length()
     label = corner
-    while True:
+    for r in range(rounds):
         new = label
         for hop in hops:
             new = np.minimum(new, label[hop])
-        if np.array_equal(new, label):
-            break
-        label, hops = new, [hop[hop] for hop in hops]
+        label = new
+        if r + 1 < rounds:
+            hops = [hop[hop] for hop in hops]
     return label
 
 

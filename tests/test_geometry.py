@@ -125,3 +125,51 @@ def test_laplacian_pattern_is_adjacency_plus_diagonal():
     pattern = (geometry.edge_graph(f, len(v)) + sp.identity(len(v))).tocsc()
     assert np.array_equal(lap.indptr, pattern.indptr)
     assert np.array_equal(lap.indices, pattern.indices)
+
+
+def test_mesh_edges_groups_the_half_edges_of_each_edge():
+    f = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4], [2, 1, 3]])  # edge 01 in three faces
+    edges = geometry.mesh_edges(f, 5)
+    assert edges.ends.tolist() == [[0, 1], [0, 2], [0, 3], [0, 4], [1, 2], [1, 3], [1, 4], [2, 3]]
+    assert np.diff(edges.starts).tolist() == [3, 1, 1, 1, 2, 2, 1, 1]
+    start, end = f.ravel(), f[:, [1, 2, 0]].ravel()  # half-edge 3f + j: corner j to j + 1
+    edge_of = np.repeat(np.arange(len(edges.ends)), np.diff(edges.starts))
+    half = edges.order
+    assert np.array_equal(np.minimum(start, end)[half], edges.ends[edge_of, 0])
+    assert np.array_equal(np.maximum(start, end)[half], edges.ends[edge_of, 1])
+    assert np.array_equal(np.sort(half), np.arange(f.size))
+
+
+def _reference_laplacian(lengths, f, n):
+    """The cotangent Laplacian summed by SciPy from one triplet per half-edge and corner."""
+    angles = geometry.corner_angles(lengths)
+    rows, cols, data = [], [], []
+    for k, (i, j) in enumerate(((1, 2), (2, 0), (0, 1))):  # the edge opposite corner k
+        w = 0.5 / np.tan(angles[:, k])
+        rows += [f[:, i], f[:, j], f[:, i], f[:, j]]
+        cols += [f[:, j], f[:, i], f[:, i], f[:, j]]
+        data += [w, w, -w, -w]
+    matrix = sp.coo_matrix((np.concatenate(data), (np.concatenate(rows), np.concatenate(cols))))
+    return matrix.tocsc()
+
+
+@pytest.mark.parametrize(
+    "mesh",
+    [torus(), disk(), open_cylinder(), "fin"],
+    ids=["torus", "disk", "cylinder", "fin"],
+)
+def test_laplacian_equals_a_plain_sparse_assembly(mesh):
+    if mesh == "fin":  # three faces on one edge, given straight to the assembly
+        v = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0.2], [0.5, 0.1, 1.0]])
+        f = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    else:
+        v, f = mesh
+    lengths = geometry.edge_lengths(v, f)
+    ours = geometry.cotan_laplacian(lengths, f, len(v))
+    reference = _reference_laplacian(lengths, f, len(v))
+    assert ours.has_sorted_indices
+    assert np.array_equal(ours.indptr, reference.indptr)
+    assert np.array_equal(ours.indices, reference.indices)
+    assert np.allclose(ours.data, reference.data, rtol=1e-12, atol=1e-12)
+    given = geometry.cotan_laplacian(lengths, f, len(v), edges=geometry.mesh_edges(f, len(v)))
+    assert np.array_equal(given.data, ours.data)

@@ -78,3 +78,12 @@ def test_two_bodies_touching_at_a_vertex(body):
     assert any("non-manifold" in r for r in touching.repairs)
     apart_sig = _sig(apart_v, faces)
     assert _l1(compute_signature(touching, Params()).histogram, apart_sig) < 1e-12
+
+
+def test_clean_mesh_keeps_the_edges_of_its_check_unless_it_splits():
+    v, f = icosphere(2)
+    mesh = clean_mesh(v, f)
+    assert np.array_equal(mesh.edges.ends, geometry.mesh_edges(f, len(v)).ends)
+    pinched_f = np.vstack([f, [[0, len(v), len(v) + 1]]])
+    pinched = clean_mesh(np.vstack([v, [[2.0, 0, 0], [2.0, 1, 0]]]), pinched_f)  # a flap at 0
+    assert pinched.edges is None
