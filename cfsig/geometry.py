@@ -97,7 +97,9 @@ def corner_angles(lengths: np.ndarray) -> np.ndarray:
             ],
             axis=1,
         )
-    return np.arccos(np.clip(np.nan_to_num(cos, nan=1.0), -1.0, 1.0))
+    cos[np.isnan(cos)] = 1.0
+    np.clip(cos, -1.0, 1.0, out=cos)
+    return np.arccos(cos, out=cos)
 
 
 def face_areas(lengths: np.ndarray) -> np.ndarray:
@@ -162,7 +164,13 @@ def mesh_edges(faces: np.ndarray, n_vertices: int) -> Edges:
     end = faces[:, [1, 2, 0]].ravel()
     low, high = np.minimum(start, end), np.maximum(start, end)
     keys = low * n_vertices + high
-    order = np.argsort(keys)
+    count = len(keys)
+    if int(n_vertices) ** 2 * count < 2**63:  # the half-edge in the key's low digits: a plain sort
+        packed = keys * count + np.arange(count)
+        packed.sort()
+        order = packed % count
+    else:
+        order = np.argsort(keys)
     sorted_keys = keys[order]
     starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1], True])
     first = order[starts[:-1]]

@@ -92,17 +92,21 @@ def sample_phi(
     """
     rng = np.random.default_rng(seed)
     cumulative = np.cumsum(areas)
-    draws = np.sort(rng.random(count)) * cumulative[-1]
+    draws = rng.random(count)
+    draws.sort()
+    draws *= cumulative[-1]
     ends = np.searchsorted(draws, cumulative, side="right")
     ends[-1] = count  # a draw rounded up to the total area still belongs to the last face
-    per_face = np.diff(ends, prepend=0)
+    face = np.repeat(np.arange(len(faces)), np.diff(ends, prepend=0))
     corner = phi[faces]
-    # phi = (1 - r1) c0 + r1 (1 - r2) c1 + r1 r2 c2 with r1 = sqrt(u1), r2 = u2 (uniform points)
-    base = np.repeat(corner[:, 0], per_face)
-    step1 = np.repeat(corner[:, 1] - corner[:, 0], per_face)
-    step2 = np.repeat(corner[:, 2] - corner[:, 1], per_face)
-    r1, r2 = np.sqrt(rng.random(count)), rng.random(count)
-    return base + r1 * (step1 + r2 * step2)
+    # phi = c0 + r1 ((c1 - c0) + r2 (c2 - c1)) with r1 = sqrt(u1), r2 = u2 (uniform points)
+    r1 = np.sqrt(rng.random(count))
+    samples = rng.random(count)
+    samples *= (corner[:, 2] - corner[:, 1])[face]
+    samples += (corner[:, 1] - corner[:, 0])[face]
+    samples *= r1
+    samples += corner[:, 0][face]
+    return samples
 
 
 def histogram(values: np.ndarray, params: Params) -> np.ndarray:
@@ -121,7 +125,8 @@ def histogram(values: np.ndarray, params: Params) -> np.ndarray:
         Fractions of the samples per bin, summing to 1.
     """
     low, high = params.edges
-    position = (values - low) * (params.bins / (high - low))
+    position = values - low
+    position *= params.bins / (high - low)
     np.clip(position, 0, params.bins - 1, out=position)
     index = position.astype(np.intp)  # truncation is the floor once clipped to >= 0
     return np.bincount(index, minlength=params.bins) / len(values)
