@@ -322,6 +322,8 @@ def pinned_system(laplacian: sp.spmatrix, labels: np.ndarray) -> tuple[sp.csc_ma
     _, pinned = np.unique(labels, return_index=True)
     keep = np.ones(len(labels), dtype=bool)
     keep[pinned] = False
+    if pinned.tolist() == [0]:  # one component: a slice, which SciPy cuts in one pass
+        return (-laplacian[1:, 1:]).tocsc(), keep
     return (-laplacian[keep][:, keep]).tocsc(), keep
 
 

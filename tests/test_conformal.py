@@ -3,7 +3,7 @@ import pytest
 from conftest import icosphere, random_rotation, torus
 
 from cfsig import geometry
-from cfsig.conformal import available_solvers, conformal_factor, solve_laplacian
+from cfsig.conformal import available_solvers, conformal_factor, pinned_system, solve_laplacian
 from cfsig.errors import SolverError
 from cfsig.mesh import clean_mesh
 
@@ -97,3 +97,18 @@ def test_unknown_solver():
     v, f = icosphere(1)
     with pytest.raises(ValueError, match="unknown solver"):
         conformal_factor(clean_mesh(v, f), solver="magic")
+
+
+@pytest.mark.parametrize("parts", [1, 2])
+def test_pinned_system_drops_the_first_vertex_of_each_component(parts):
+    v, f = torus(nu=12, nv=6)
+    f = np.vstack([f + k * len(v) for k in range(parts)])
+    lap = geometry.cotan_laplacian(
+        geometry.edge_lengths(np.vstack([v] * parts), f), f, parts * len(v)
+    )
+    labels = np.repeat(np.arange(parts), len(v))
+    system, keep = pinned_system(lap, labels)
+    assert np.flatnonzero(~keep).tolist() == [k * len(v) for k in range(parts)]
+    expected = -lap.toarray()[np.ix_(keep, keep)]
+    assert system.format == "csc" and system.has_sorted_indices
+    assert np.array_equal(system.toarray(), expected)
