@@ -173,6 +173,7 @@ def mesh_edges(faces: np.ndarray, n_vertices: int) -> Edges:
         order = np.argsort(keys)
     sorted_keys = keys[order]
     starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1], True])
+    starts = starts[: count + 1]  # no faces: no edges, starts == [0]
     first = order[starts[:-1]]
     return Edges(np.stack([low[first], high[first]], axis=1), order, starts)
 

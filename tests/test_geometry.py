@@ -138,6 +138,8 @@ def test_mesh_edges_groups_the_half_edges_of_each_edge():
     assert np.array_equal(np.minimum(start, end)[half], edges.ends[edge_of, 0])
     assert np.array_equal(np.maximum(start, end)[half], edges.ends[edge_of, 1])
     assert np.array_equal(np.sort(half), np.arange(f.size))
+    none = geometry.mesh_edges(np.empty((0, 3), dtype=np.int64), 3)
+    assert none.ends.shape == (0, 2) and none.starts.tolist() == [0]
 
 
 def _reference_laplacian(lengths, f, n):
