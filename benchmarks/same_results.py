@@ -1,0 +1,89 @@
+"""Check that two versions of cfsig give the same results bit for bit on a data set.
+
+``dump`` writes, for every mesh and solver family, phi, the histogram and the curvature error,
+and per mesh the checked vertices and faces, the Laplacian (its CSC arrays) and the curvature,
+to an ``.npz`` file; run it once per version (each with its own ``PYTHONPATH``). ``compare``
+prints, per quantity, whether the two dumps are identical, and phi's largest difference relative
+to its range.
+
+    python benchmarks/same_results.py dump OUT.npz [--every K] [--solvers cholmod scipy]
+    python benchmarks/same_results.py compare A.npz B.npz
+"""
+
+from __future__ import annotations
+
+import os
+
+# One BLAS/OpenMP thread, set before NumPy loads its libraries.
+os.environ.update(
+    dict.fromkeys(["OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"], "1")
+)
+
+import argparse
+from pathlib import Path
+
+import common
+import numpy as np
+
+from cfsig.conformal import available_solvers, operators
+from cfsig.params import Params
+from cfsig.signature import mesh_and_signature
+
+
+def dump(args: argparse.Namespace) -> None:
+    """Compute and write every result of every mesh."""
+    solvers = [s for s in args.solvers if s in available_solvers()]
+    out: dict[str, np.ndarray] = {}
+    for path in common.meshes(args):
+        key = f"{path.parent.name}_{path.stem}"
+        for solver in solvers:
+            mesh, sig = mesh_and_signature(path, Params(), solver)
+            out[f"{key}/{solver}/phi"] = sig.phi
+            out[f"{key}/{solver}/histogram"] = sig.histogram
+            out[f"{key}/{solver}/curvature_error"] = np.array(sig.curvature_error)
+        ops = operators(mesh)
+        lap = ops.laplacian
+        out[f"{key}/vertices"], out[f"{key}/faces"] = mesh.vertices, mesh.faces
+        out[f"{key}/laplacian"] = np.concatenate([lap.indptr, lap.indices]).astype(float)
+        out[f"{key}/laplacian_data"], out[f"{key}/curvature"] = lap.data, ops.curvature
+    np.savez(args.out, **out)
+    print(f"{len(out)} arrays written to {args.out}")
+
+
+def compare(args: argparse.Namespace) -> None:
+    """Print, per quantity, whether two dumps agree bit for bit, and phi's largest change."""
+    a, b = np.load(args.a), np.load(args.b)
+    if set(a.files) != set(b.files):
+        raise SystemExit("the dumps hold different meshes or solvers")
+    identical: dict[str, bool] = {}
+    phi_change: dict[str, float] = {}
+    for name in sorted(a.files):
+        quantity = name.split("/", 1)[1]
+        x, y = a[name], b[name]
+        same = x.shape == y.shape and np.array_equal(x, y)
+        identical[quantity] = identical.get(quantity, True) and same
+        if quantity.endswith("phi") and x.shape == y.shape:
+            change = float(np.abs(x - y).max() / np.ptp(x))
+            phi_change[quantity] = max(phi_change.get(quantity, 0.0), change)
+    for quantity, same in identical.items():
+        extra = f", max |dphi| / range {phi_change[quantity]:.3g}" if quantity in phi_change else ""
+        print(f"{quantity}: {'identical' if same else 'DIFFERENT'}{extra}")
+
+
+def main() -> None:
+    """Parse the command and run it."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    commands = parser.add_subparsers(dest="command", required=True)
+    run = commands.add_parser("dump", help="compute and write the results")
+    run.add_argument("out", type=Path)
+    common.data_arguments(run)
+    run.add_argument("--solvers", nargs="+", default=["cholmod", "scipy"])
+    check = commands.add_parser("compare", help="compare two dumps")
+    check.add_argument("a", type=Path)
+    check.add_argument("b", type=Path)
+    args = parser.parse_args()
+    dump(args) if args.command == "dump" else compare(args)
+
+
+if __name__ == "__main__":
+    main()
