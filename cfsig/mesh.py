@@ -9,6 +9,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from .errors import MeshError, MissingDependencyError
 from .geometry import Edges, mesh_edges
@@ -202,7 +204,7 @@ def split_nonmanifold(
     or on an edge shared by three or more faces (a fin), has several; each fan after the first
     gets a new vertex. The result has at most two faces per edge and one fan per vertex, so the
     paper's angle defect and Laplacian apply; parts that touched only at vertices become
-    separate components.
+    separate components. Fans do not depend on the orientation of the faces.
 
     Parameters
     ----------
@@ -238,26 +240,30 @@ def split_nonmanifold(
 
 
 def _fans(faces: np.ndarray, edges: Edges) -> np.ndarray:
-    """The smallest corner of the fan of every corner ``3f + j``, by pointer jumping."""
-    corner = np.arange(faces.size)
+    """The smallest corner of the fan of every corner ``3f + j``."""
     vertex = faces.ravel()
     step = np.tile(np.array([1, 1, -2]), len(faces))  # from a corner to the next in its face
     counts = np.diff(edges.starts)
     closed = bool(np.all(counts == 2))
     pair = edges.starts[:-1] if closed else edges.starts[:-1][counts == 2]
     a, b = edges.order[pair], edges.order[pair + 1]  # edges of two faces join fans; others break
+    if np.any(vertex[a] == vertex[b]):  # two faces run along an edge the same way
+        return _fans_by_components(vertex, step, a, b)
+    return _fans_by_jumping(vertex, step, a, b, closed)
+
+
+def _fans_by_jumping(
+    vertex: np.ndarray, step: np.ndarray, a: np.ndarray, b: np.ndarray, closed: bool
+) -> np.ndarray:
+    """`_fans` by pointer jumping around each vertex; needs consistently oriented pairs a, b."""
+    corner = np.arange(vertex.size)
     twin = corner.copy()  # half-edge 3f + j runs from corner 3f + j to the next
     twin[a], twin[b] = b, a
-
-    def at_vertex(half: np.ndarray) -> np.ndarray:
-        """The corner at ``vertex`` of the face of each half-edge (orientation-agnostic)."""
-        return np.where(vertex[half] == vertex, half, half + step[half])
-
     # Around a vertex, step to the face across the edge leaving the corner and across the edge
     # ending at it; on a closed mesh every fan is a cycle and the first direction suffices.
-    hops = [at_vertex(twin)]
+    hops = [_corner_at(twin, vertex, vertex, step)]
     if not closed:
-        hops.append(at_vertex(twin[corner - np.roll(step, 1)]))
+        hops.append(_corner_at(twin[corner - np.roll(step, 1)], vertex, vertex, step))
     # After r rounds each label is the minimum over 2^r consecutive corners of its fan (in both
     # directions when open), so r with 2^r >= the most corners at a vertex covers every fan.
     rounds = (int(np.bincount(vertex).max()) - 1).bit_length()
@@ -270,6 +276,25 @@ def _fans(faces: np.ndarray, edges: Edges) -> np.ndarray:
         if r + 1 < rounds:
             hops = [hop[hop] for hop in hops]
     return label
+
+
+def _fans_by_components(
+    vertex: np.ndarray, step: np.ndarray, a: np.ndarray, b: np.ndarray
+) -> np.ndarray:
+    """`_fans` as connected components of corners joined across the edges of two faces a, b."""
+    ends = np.r_[a, a + step[a]]  # the corners of a's face at the edge's two vertices
+    across = _corner_at(np.r_[b, b], vertex[ends], vertex, step)
+    graph = sp.coo_matrix((np.ones(len(ends)), (ends, across)), shape=(vertex.size,) * 2)
+    _, label = connected_components(graph, directed=False)
+    _, smallest = np.unique(label, return_index=True)
+    return smallest[label]
+
+
+def _corner_at(
+    half: np.ndarray, at: np.ndarray, vertex: np.ndarray, step: np.ndarray
+) -> np.ndarray:
+    """The corner at vertex ``at`` of the face of each half-edge ``half``, either way round."""
+    return np.where(vertex[half] == at, half, half + step[half])
 
 
 def _has_duplicate_rows(rows: np.ndarray) -> bool:

@@ -2,9 +2,10 @@
 
 import numpy as np
 import pytest
-from conftest import icosphere
+from conftest import disk, icosphere, open_cylinder, torus
 
 from cfsig import geometry
+from cfsig.conformal import conformal_factor
 from cfsig.demo import capsule, limbed_body
 from cfsig.mesh import clean_mesh, split_nonmanifold
 from cfsig.params import Params
@@ -25,18 +26,39 @@ def test_manifold_mesh_is_untouched():
     assert faces is f and len(copies) == 0
 
 
-def test_two_parts_touching_at_a_vertex_are_separated():
+def _touching_spheres():
+    """Two icospheres sharing vertex 0, and the same two spheres drawn 1e-3 apart."""
     v1, f1 = icosphere(2)
     v2, f2 = icosphere(1)
     v2 = v2 + (v1[0] - v2[5])  # vertex 5 of the small sphere touches vertex 0 of the big one
     glued_v = np.vstack([v1, np.delete(v2, 5, axis=0)])
     remap = np.r_[np.arange(5), -1, np.arange(5, len(v2) - 1)] + len(v1)
     remap[5] = 0
-    glued_f = np.vstack([f1, remap[f2]])
+    apart = np.vstack([v1, v2 + [0.0, 0.0, 1e-3]]), np.vstack([f1, f2 + len(v1)])
+    return (glued_v, np.vstack([f1, remap[f2]])), apart
+
+
+def _finned_sphere():
+    """An icosphere with a fin face on the edge of its first face's first two corners."""
+    v, f = icosphere(2)
+    a, b = f[0, :2]
+    tip = (v[a] + v[b]) / 2 * 1.5
+    return np.vstack([v, tip]), np.vstack([f, [[a, b, len(v)]]]), (a, b)
+
+
+def _flip_some(f, seed, fraction=0.3):
+    """The faces with a random subset reversed (inconsistent orientation), and that subset."""
+    flip = np.random.default_rng(seed).random(len(f)) < fraction
+    flipped = f.copy()
+    flipped[flip] = f[flip, ::-1]
+    return flipped, flip
+
+
+def test_two_parts_touching_at_a_vertex_are_separated():
+    (glued_v, glued_f), apart = _touching_spheres()
     mesh = clean_mesh(glued_v, glued_f)
     assert any("non-manifold" in r for r in mesh.repairs)
     assert geometry.components(geometry.edge_graph(mesh.faces, len(mesh.vertices)))[0] == 2
-    apart = np.vstack([v1, v2 + [0.0, 0.0, 1e-3]]), np.vstack([f1, f2 + len(v1)])
     assert _l1(compute_signature(mesh, Params()).histogram, _sig(*apart)) < 1e-12
 
 
@@ -87,3 +109,59 @@ def test_clean_mesh_keeps_the_edges_of_its_check_unless_it_splits():
     pinched_f = np.vstack([f, [[0, len(v), len(v) + 1]]])
     pinched = clean_mesh(np.vstack([v, [[2.0, 0, 0], [2.0, 1, 0]]]), pinched_f)  # a flap at 0
     assert pinched.edges is None
+
+
+@pytest.mark.parametrize(
+    "shape",
+    [icosphere(3), torus(), open_cylinder(), disk()],
+    ids=["sphere", "torus", "cylinder", "disk"],
+)
+@pytest.mark.parametrize("seed", [0, 1])
+def test_inconsistent_orientation_is_not_split(shape, seed):
+    v, f = shape
+    flipped, flip = _flip_some(f, seed)
+    _, counts = geometry.edge_face_counts(flipped, len(v))
+    assert flip.any() and counts.max() == 2  # manifold, orientation inconsistent
+    faces, copies = split_nonmanifold(flipped, len(v))
+    assert faces is flipped and len(copies) == 0
+    mesh = clean_mesh(v, flipped)
+    assert mesh.repairs == () and len(mesh.vertices) == len(v)
+    phi = conformal_factor(mesh).phi
+    np.testing.assert_allclose(phi, conformal_factor(clean_mesh(v, f)).phi, rtol=0, atol=1e-12)
+
+
+def test_moebius_strip_is_not_split():
+    n_around, n_across = 40, 5
+    u = np.repeat(2 * np.pi * np.arange(n_around) / n_around, n_across)
+    s = np.tile(np.linspace(-0.3, 0.3, n_across), n_around)
+    radius = 1 + s * np.cos(u / 2)
+    v = np.column_stack([radius * np.cos(u), radius * np.sin(u), s * np.sin(u / 2)])
+    idx = np.arange(n_around * n_across).reshape(n_around, n_across)
+    nxt = np.vstack([idx[1:], idx[0, ::-1]])  # the half twist: across the seam s becomes -s
+    a, b, c, d = idx[:, :-1], nxt[:, :-1], nxt[:, 1:], idx[:, 1:]
+    f = np.vstack([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    _, copies = split_nonmanifold(f, len(v))
+    assert len(copies) == 0
+    mesh = clean_mesh(v, f)
+    assert len(mesh.vertices) == len(v)
+    _, counts = geometry.edge_face_counts(mesh.faces, len(v))
+    assert counts.max() == 2 and np.count_nonzero(counts == 1) == 2 * n_around  # one long loop
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("build", ["touching", "fin"])
+def test_inconsistent_orientation_keeps_the_genuine_splits(build, seed):
+    if build == "touching":
+        (v, f), _ = _touching_spheres()
+        expected = [0]
+    else:
+        v, f, expected = _finned_sphere()
+        assert geometry.edge_face_counts(f, len(v))[1].max() == 3
+    faces, copies = split_nonmanifold(f, len(v))
+    assert sorted(copies) == sorted(expected)
+    flipped, flip = _flip_some(f, seed)
+    flipped_faces, flipped_copies = split_nonmanifold(flipped, len(v))
+    assert np.array_equal(flipped_copies, copies)
+    faces[flip] = faces[flip, ::-1]
+    assert np.array_equal(flipped_faces, faces)
+    assert clean_mesh(v, flipped).repairs == clean_mesh(v, f).repairs
