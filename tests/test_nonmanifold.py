@@ -27,14 +27,16 @@ def test_manifold_mesh_is_untouched():
 
 
 def _touching_spheres():
-    """Two icospheres sharing vertex 0, and the same two spheres drawn 1e-3 apart."""
+    """Two icospheres touching at vertex 0 only, and the same two spheres drawn 1e-3 apart."""
     v1, f1 = icosphere(2)
     v2, f2 = icosphere(1)
-    v2 = v2 + (v1[0] - v2[5])  # vertex 5 of the small sphere touches vertex 0 of the big one
-    glued_v = np.vstack([v1, np.delete(v2, 5, axis=0)])
-    remap = np.r_[np.arange(5), -1, np.arange(5, len(v2) - 1)] + len(v1)
-    remap[5] = 0
-    apart = np.vstack([v1, v2 + [0.0, 0.0, 1e-3]]), np.vstack([f1, f2 + len(v1)])
+    opposite = int(np.argmin(np.linalg.norm(v2 + v1[0], axis=1)))  # the small one's -v1[0]
+    v2 = v2 + (v1[0] - v2[opposite])  # outside the big sphere, tangent to it at v1[0]
+    keep = np.arange(len(v2)) != opposite
+    glued_v = np.vstack([v1, v2[keep]])
+    remap = np.zeros(len(v2), dtype=np.int64)
+    remap[keep] = len(v1) + np.arange(len(v2) - 1)
+    apart = np.vstack([v1, v2 + 1e-3 * v1[0]]), np.vstack([f1, f2 + len(v1)])
     return (glued_v, np.vstack([f1, remap[f2]])), apart
 
 
@@ -57,7 +59,9 @@ def _flip_some(f, seed, fraction=0.3):
 def test_two_parts_touching_at_a_vertex_are_separated():
     (glued_v, glued_f), apart = _touching_spheres()
     mesh = clean_mesh(glued_v, glued_f)
+    assert not any("coincident" in r for r in mesh.repairs)  # they touch at one vertex only
     assert any("non-manifold" in r for r in mesh.repairs)
+    assert len(mesh.vertices) == len(glued_v) + 1
     assert geometry.components(geometry.edge_graph(mesh.faces, len(mesh.vertices)))[0] == 2
     assert _l1(compute_signature(mesh, Params()).histogram, _sig(*apart)) < 1e-12
 
