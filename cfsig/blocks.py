@@ -1,20 +1,25 @@
 """Blocks: stream the rows of a 2-D float32 HDF5 dataset without holding it in memory.
 
 Where HDF5 stores rows as plain bytes (contiguous, or chunked by whole rows with no filter, in a
-file without a user block, read by the default driver), a block is memory-mapped from the file:
-the page cache is read once, by the code that uses the rows, with no copy through HDF5. Any other
-layout (compressed, compact, external, non-native byte order, chunks not yet allocated) is read
-through h5py into a buffer. Mapping is safe because an index file is never modified in place:
-a commit renames a new file over it, and the mapping keeps the file that was opened.
+file without a user block, read by the default driver), a block is read from the file with one
+``preadv`` into a reused buffer, at the offset HDF5 reports: one copy from the page cache, no
+HDF5 in between. With a thread per core this scanned faster than memory-mapping each block,
+though one thread alone reads mapped blocks faster (`docs/query-options.md`). Any
+other layout (compressed, compact, external, non-native byte order, chunks not yet allocated) is
+read through h5py into the same buffer. Reading at fixed offsets is safe because an index file is
+never modified in place: a commit renames a new file over it, and the open file stays the one
+that was opened.
 """
 
 from __future__ import annotations
 
-import mmap
+import os
 from dataclasses import dataclass
 
 import h5py
 import numpy as np
+
+from .errors import IndexFileError
 
 _FLOAT32 = np.dtype(np.float32)
 
@@ -28,7 +33,7 @@ class Block:
     start, stop : int
         Row range ``[start, stop)``.
     offset : int or None
-        Byte offset of row ``start`` in the file when the rows can be mapped, else None.
+        Byte offset of row ``start`` in the file when the rows are plain bytes there, else None.
     """
 
     start: int
@@ -37,14 +42,14 @@ class Block:
 
 
 def plan_blocks(dataset: h5py.Dataset, rows_per_block: int) -> list[Block]:
-    """Split a dataset's rows into blocks: one per chunk where chunks can be mapped.
+    """Split a dataset's rows into blocks: one per chunk where chunks can be read directly.
 
     Parameters
     ----------
     dataset : h5py.Dataset
         A 2-D dataset of shape (N, bins).
     rows_per_block : int
-        Rows per block when the rows cannot be mapped chunk by chunk (rounded up to whole
+        Rows per block when the rows cannot be read chunk by chunk (rounded up to whole
         chunks) or the dataset is contiguous.
 
     Returns
@@ -52,11 +57,11 @@ def plan_blocks(dataset: h5py.Dataset, rows_per_block: int) -> list[Block]:
     blocks : list of Block
         Covering rows 0 to N in order.
     """
-    n, mappable = dataset.shape[0], _mappable(dataset)
-    if dataset.chunks is not None and mappable:
+    n, plain = dataset.shape[0], _plain(dataset)
+    if dataset.chunks is not None and plain:
         step, offsets = dataset.chunks[0], _chunk_offsets(dataset)
         return [Block(s, min(s + step, n), offsets.get(s)) for s in range(0, n, step)]
-    base = dataset.id.get_offset() if mappable else None
+    base = dataset.id.get_offset() if plain else None
     if dataset.chunks is not None:
         rows_per_block = -(-rows_per_block // dataset.chunks[0]) * dataset.chunks[0]
     row_bytes = dataset.shape[1] * _FLOAT32.itemsize
@@ -67,10 +72,7 @@ def plan_blocks(dataset: h5py.Dataset, rows_per_block: int) -> list[Block]:
 
 
 def read_block(dataset: h5py.Dataset, block: Block, buffer: np.ndarray) -> np.ndarray:
-    """The rows of one block, mapped from the file or read into ``buffer``.
-
-    A mapped block stays mapped while the returned array (or a view of it) is referenced: drop
-    it before reading many more.
+    """The rows of one block, read into ``buffer``.
 
     Parameters
     ----------
@@ -78,38 +80,37 @@ def read_block(dataset: h5py.Dataset, block: Block, buffer: np.ndarray) -> np.nd
         The dataset the block was planned on, still open.
     block : Block
         From `plan_blocks`.
-    buffer : (rows, bins) float32
-        Scratch space with at least ``block.stop - block.start`` rows, used when the block cannot
-        be mapped.
+    buffer : (rows, bins) float32, C-contiguous
+        Space for at least ``block.stop - block.start`` rows, reused from block to block.
 
     Returns
     -------
-    rows : (block.stop - block.start, bins) float32, read-only when mapped
+    rows : (block.stop - block.start, bins) float32
+        A view of ``buffer``.
+
+    Raises
+    ------
+    IndexFileError
+        The file ends before the block does.
     """
-    count = block.stop - block.start
+    out = buffer[: block.stop - block.start]
     if block.offset is None:
-        out = buffer[:count]
         dataset.read_direct(out, np.s_[block.start : block.stop])
         return out
-    bins = dataset.shape[1]
-    aligned = block.offset - block.offset % mmap.ALLOCATIONGRANULARITY
-    skip = block.offset - aligned
-    # MAP_POPULATE (Linux) maps the pages in one call instead of one page fault per 4 KiB.
-    view = mmap.mmap(
-        dataset.file.id.get_vfd_handle(), skip + count * bins * _FLOAT32.itemsize,
-        flags=mmap.MAP_SHARED | getattr(mmap, "MAP_POPULATE", 0), prot=mmap.PROT_READ,
-        offset=aligned,
-    )  # fmt: skip
-    return np.frombuffer(view, _FLOAT32, count * bins, skip).reshape(count, bins)
+    handle = dataset.file.id.get_vfd_handle()
+    if os.preadv(handle, [memoryview(out).cast("B")], block.offset) != out.nbytes:
+        raise IndexFileError(f"{dataset.file.filename}: the file ends inside the signatures")
+    return out
 
 
-def _mappable(dataset: h5py.Dataset) -> bool:
+def _plain(dataset: h5py.Dataset) -> bool:
     """Whether the dataset's rows are plain native float32 bytes at known file offsets."""
     dcpl = dataset.id.get_create_plist()
     layout = dcpl.get_layout()
     chunked_by_rows = layout == h5py.h5d.CHUNKED and dataset.chunks[1] == dataset.shape[1]
     return (
-        dataset.file.driver == "sec2"
+        hasattr(os, "preadv")  # not on Windows: read through h5py there
+        and dataset.file.driver == "sec2"
         and dataset.file.id.get_create_plist().get_userblock() == 0
         and dataset.dtype == _FLOAT32
         and dataset.ndim == 2

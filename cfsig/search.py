@@ -107,7 +107,6 @@ def nearest(reader: IndexReader, queries: np.ndarray, k: int) -> tuple[np.ndarra
                 kernel(queries[q0 : q0 + group], rows, dist)
                 with lock:
                     best.merge(q0, block.start, dist)
-            del rows  # unmaps a mapped block
 
     threads = min(_threads(), len(blocks))
     with ThreadPoolExecutor(threads) as pool:

@@ -1,3 +1,5 @@
+import os
+
 import h5py
 import numpy as np
 import pytest
@@ -6,6 +8,7 @@ import cfsig.index
 import cfsig.l1
 import cfsig.search
 from cfsig.blocks import plan_blocks, read_block
+from cfsig.errors import IndexFileError
 from cfsig.index import Entry, IndexReader, IndexWriter
 from cfsig.l1 import choose_kernel, fast_kernel, l1_numpy
 from cfsig.params import Params
@@ -153,14 +156,14 @@ def test_every_layout_gives_the_same_result(tmp_path, monkeypatch, layout):
         buffer = np.empty((max(b.stop - b.start for b in blocks), 200), np.float32)
         parts = [read_block(r.signatures, b, buffer).copy() for b in blocks]
         rows, _ = nearest(r, hists[:2], 6)
-    mapped = [b.offset is not None for b in blocks]
-    assert all(mapped) if layout in ("chunked", "contiguous") else not any(mapped)
+    direct = [b.offset is not None for b in blocks]  # read from the file, not through HDF5
+    assert all(direct) if layout in ("chunked", "contiguous") else not any(direct)
     assert all(b.stop - b.start <= 16 for b in blocks)
     assert np.array_equal(np.concatenate(parts), hists)
     assert np.array_equal(rows, _brute_nearest(hists[:2], hists, 6)[0])
 
 
-def test_small_unmappable_chunks_are_read_many_at_a_time(tmp_path):
+def test_small_compressed_chunks_are_read_many_at_a_time(tmp_path):
     path = tmp_path / "small-chunks.h5"
     data = _histograms(1000, 11)
     with h5py.File(path, "w") as f:
@@ -185,6 +188,16 @@ def test_unwritten_chunks_are_read_through_hdf5(tmp_path):
         parts = [read_block(f["s"], b, buffer).copy() for b in blocks]
         assert [b.offset is not None for b in blocks] == [False, True, False, True]
         assert np.array_equal(np.concatenate(parts), f["s"][:])
+
+
+def test_a_file_cut_short_after_opening_is_a_clear_error(tmp_path, monkeypatch):
+    path = tmp_path / "i.h5"
+    _build(path, _histograms(40, 12), 8, monkeypatch)
+    with IndexReader(path) as r:
+        blocks = plan_blocks(r.signatures, 8)
+        os.truncate(path, blocks[-1].offset + 10)
+        with pytest.raises(IndexFileError, match="ends inside the signatures"):
+            nearest(r, _histograms(1, 4), 5)
 
 
 def test_empty_index_and_k_zero(tmp_path):
