@@ -210,7 +210,7 @@ def test_empty_index_and_k_zero(tmp_path):
         assert search(r, _histograms(1, 9), 5) == [[]]
 
 
-def test_nan_rows_rank_last(tmp_path, monkeypatch):
+def test_nan_rows_rank_last(tmp_path, monkeypatch, kernel):
     hists = _histograms(10, 10)
     hists[2] = np.nan
     _build(tmp_path / "i.h5", hists, 4, monkeypatch)
