@@ -21,9 +21,7 @@ os.environ.update(
 import argparse
 import hashlib
 import json
-import time
 from collections import defaultdict
-from collections.abc import Callable
 from pathlib import Path
 
 import common
@@ -46,17 +44,12 @@ from cfsig.signature import signature_file, signature_of
 STAGES = ("read", "operators", "solve", "curvature error", "sampling+histogram")
 
 
-def timed(func: Callable[[], object]) -> tuple[object, float, float]:
-    """Run ``func`` once: its result, CPU seconds and wall seconds."""
-    cpu, wall = time.process_time(), time.perf_counter()
-    result = func()
-    return result, time.process_time() - cpu, time.perf_counter() - wall
-
-
 def measure(path: Path, params: Params, solver: str) -> dict:
     """End-to-end, per-stage and bare-solve times of one mesh with one solver family."""
     row: dict = {"mesh": f"{path.parent.name}/{path.name}", "solver": solver}
-    sig, row["e2e_cpu"], row["e2e_wall"] = timed(lambda: signature_file(path, params, solver))
+    sig, row["e2e_cpu"], row["e2e_wall"] = common.timed(
+        lambda: signature_file(path, params, solver)
+    )
     row["vertices"], row["curvature_error"] = sig.n_vertices, sig.curvature_error
 
     def read():
@@ -65,29 +58,29 @@ def measure(path: Path, params: Params, solver: str) -> dict:
         return parse_mesh(data, path)
 
     stages = {}
-    mesh, *stages["read"] = timed(read)
-    ops, *stages["operators"] = timed(lambda: operators(mesh, params.mollify))
+    mesh, *stages["read"] = common.timed(read)
+    ops, *stages["operators"] = common.timed(lambda: operators(mesh, params.mollify))
     rhs = ops.target - ops.curvature
 
     def solve():
         factorized = factorize_laplacian(ops.laplacian, ops.labels, solver)
         return factorized, factorized(rhs)
 
-    (factorized, phi), *stages["solve"] = timed(solve)
-    error, *stages["curvature error"] = timed(
+    (factorized, phi), *stages["solve"] = common.timed(solve)
+    error, *stages["curvature error"] = common.timed(
         lambda: curvature_error(ops.lengths, mesh.faces, ops.boundary, phi, ops.target)
     )
     cf = ConformalFactor(phi, ops.curvature, ops.target, ops.face_areas, ops.n_components,
                          ops.mollified, error, ops.laplacian, ops.vertex_area, ops.labels,
                          factorized)  # fmt: skip
-    hist, *stages["sampling+histogram"] = timed(lambda: signature_of(cf, mesh.faces, params))
+    hist, *stages["sampling+histogram"] = common.timed(lambda: signature_of(cf, mesh.faces, params))
     assert np.array_equal(hist, sig.histogram), f"{path}: stages disagree with signature_file"
     for stage, (cpu, wall) in stages.items():
         row[f"{stage}_cpu"], row[f"{stage}_wall"] = cpu, wall
     # Two parts of those stages, timed again on their own: checking and repairing the mesh
     # (of "read") and assembling the Laplacian from the edges that check sorted (of "operators").
-    _, row["clean_mesh_cpu"], _ = timed(lambda: clean_mesh(mesh.vertices, mesh.faces))
-    _, row["laplacian_cpu"], _ = timed(
+    _, row["clean_mesh_cpu"], _ = common.timed(lambda: clean_mesh(mesh.vertices, mesh.faces))
+    _, row["laplacian_cpu"], _ = common.timed(
         lambda: cotan_laplacian(
             ops.lengths, mesh.faces, len(mesh.vertices), ops.face_areas, mesh.edges
         )
@@ -95,7 +88,7 @@ def measure(path: Path, params: Params, solver: str) -> dict:
 
     system, keep = pinned_system(ops.laplacian, ops.labels)
     b = -rhs[keep]
-    _, row["bare_cpu"], row["bare_wall"] = timed(lambda: factorize(system, solver)(b))
+    _, row["bare_cpu"], row["bare_wall"] = common.timed(lambda: factorize(system, solver)(b))
     row["ratio_cpu"] = row["e2e_cpu"] / row["bare_cpu"]
     row["ratio_wall"] = row["e2e_wall"] / row["bare_wall"]
     return row

@@ -29,9 +29,7 @@ import argparse
 import contextlib
 import io
 import json
-import time
 from collections import defaultdict
-from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 
@@ -51,26 +49,19 @@ def measure(path: Path, params: Params) -> dict:
     from lapy import Solver, TriaMesh
 
     with contextlib.redirect_stdout(io.StringIO()):  # lapy's reader prints what it read
-        lapy_read = cpu_seconds(partial(TriaMesh.read_off, str(path)))
+        lapy_read = common.timed(partial(TriaMesh.read_off, str(path)))[1]
     mesh = read_mesh(path)
-    shapedna = cpu_seconds(
+    shapedna = common.timed(
         lambda: Solver(TriaMesh(mesh.vertices, mesh.faces)).eigs(k=EIGENVALUES, rng=0)
-    )
+    )[1]
     row = {"mesh": f"{path.parent.name}/{path.name}", "vertices": len(mesh.vertices),
            "shapedna memory": shapedna, "shapedna file": lapy_read + shapedna}  # fmt: skip
     for solver in SOLVERS:
-        row[f"{solver} memory"] = cpu_seconds(partial(compute_signature, mesh, params, solver))
-        row[f"{solver} file"] = cpu_seconds(partial(signature_file, path, params, solver))
+        row[f"{solver} memory"] = common.timed(partial(compute_signature, mesh, params, solver))[1]
+        row[f"{solver} file"] = common.timed(partial(signature_file, path, params, solver))[1]
         for start in PROTOCOLS:
             row[f"speedup {solver} {start}"] = row[f"shapedna {start}"] / row[f"{solver} {start}"]
     return row
-
-
-def cpu_seconds(func: Callable[[], object]) -> float:
-    """Run ``func`` once and return the CPU seconds it took."""
-    start = time.process_time()
-    func()
-    return time.process_time() - start
 
 
 def main() -> None:

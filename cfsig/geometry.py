@@ -269,10 +269,10 @@ def edge_graph(faces: np.ndarray, n_vertices: int) -> sp.csr_matrix:
         ``graph[i, j]`` is the number of faces that contain the edge ij: 1 on a boundary, 2 inside
         a manifold, more on a non-manifold edge; no entry where there is no edge.
     """
-    rows = faces.ravel()
-    cols = faces[:, [1, 2, 0]].ravel()
-    half = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_vertices, n_vertices))
-    return (half + half.T).tocsr()
+    ends, counts = edge_face_counts(faces, n_vertices)
+    both = np.r_[counts, counts].astype(np.float64)
+    ij = (np.r_[ends[:, 0], ends[:, 1]], np.r_[ends[:, 1], ends[:, 0]])
+    return sp.csr_matrix((both, ij), shape=(n_vertices, n_vertices))
 
 
 def edge_face_counts(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
