@@ -213,17 +213,16 @@ def cotan_laplacian(
     if edges is None:
         edges = mesh_edges(faces, n_vertices)
     a2 = lengths * lengths
-    half_cot = 0.5 * ((_row_sums(a2) - 2 * a2) / (4 * areas)[:, None])
-    rows = np.concatenate([faces[:, b] for b, _ in _OPPOSITE])
-    cols = np.concatenate([faces[:, c] for _, c in _OPPOSITE])
-    w = half_cot.T.ravel()
-    diag = -(np.bincount(rows, w, n_vertices) + np.bincount(cols, w, n_vertices))
+    half_cot = _row_sums(a2) - 2 * a2  # cot = (b^2 + c^2 - a^2) / (4 area), halved
+    half_cot /= (8 * areas)[:, None]
     # Half-edge 3f + j is opposite corner (j + 2) % 3; an edge's weight sums its half-edges'.
     per_half_edge = half_cot[:, [2, 0, 1]].ravel()[edges.order]
     if len(per_half_edge) == 2 * len(edges.ends) and np.all(np.diff(edges.starts) == 2):
         weight = per_half_edge[0::2] + per_half_edge[1::2]  # closed: two faces on every edge
     else:
         weight = np.add.reduceat(per_half_edge, edges.starts[:-1])
+    low, high = edges.ends[:, 0], edges.ends[:, 1]
+    diag = -(np.bincount(low, weight, n_vertices) + np.bincount(high, weight, n_vertices))
     return _symmetric_csc(edges.ends, weight, diag, n_vertices)
 
 
