@@ -14,11 +14,14 @@ from itertools import islice
 from pathlib import Path
 
 from .errors import CfsigError, ClusterError, MissingDependencyError
+from .index import Entry, IndexWriter
+from .mesh import find_meshes
 from .params import Params
 from .signature import Signature, signature_file
 
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 _CONNECT_TIMEOUT = "20s"
+_COMMIT_SECONDS = 30.0
 Compute = Callable[[Path, Params, str], Signature]
 
 
@@ -39,6 +42,9 @@ class Outcome:
     path: Path
     signature: Signature | None
     error: str = ""
+
+
+Progress = Callable[[Iterator[Outcome], int], Iterable[Outcome]]
 
 
 def compute_many(
@@ -115,6 +121,83 @@ def compute_many(
         for path in suspects:
             yield _isolated(path, params, solver, compute)
         yield from compute_many(pending, params, solver, jobs, compute=compute)
+
+
+def index_meshes(
+    writer: IndexWriter,
+    paths: Iterable[str | os.PathLike],
+    solver: str = "auto",
+    jobs: int | None = None,
+    scheduler: str | None = None,
+    strict: bool = False,
+    commit_every: int = 200,
+    progress: Progress | None = None,
+) -> tuple[int, list[str]]:
+    """Compute the new and changed meshes under some files and folders and add them to an index.
+
+    Files are found by `cfsig.mesh.find_meshes`; a file whose name is indexed with the same
+    contents (SHA-256) is skipped, the others are computed by `compute_many` and added as
+    `Entry` (name, the name of the folder holding the file as label, absolute path). The writer
+    commits every ``commit_every`` meshes and every 30 s, so a killed job keeps what it
+    committed; the caller's ``with writer`` commits the rest.
+
+    Parameters
+    ----------
+    writer : IndexWriter
+        The open index; its ``params`` are those computed.
+    paths : iterable of str or os.PathLike
+        Mesh files and folders.
+    solver : {"auto", "cholmod", "eigen", "scipy"}
+        Sparse solver backend.
+    jobs, scheduler
+        As `compute_many`.
+    strict : bool
+        Stop at the first file that fails.
+    commit_every : int
+        Meshes between commits.
+    progress : callable, optional
+        ``progress(outcomes, total)`` wraps the iterator of `Outcome` (``total`` files to
+        compute, in completion order) and yields the same outcomes, e.g. to show a progress bar.
+
+    Returns
+    -------
+    added : int
+        Meshes added or updated.
+    failures : list of str
+        One line per file that failed or whose name another file already took,
+        ``<file>: <reason>``.
+
+    Raises
+    ------
+    MissingDependencyError, ClusterError
+        As `compute_many`.
+    IndexFileError
+        A commit failed.
+    """
+    todo, names, taken, failures = [], {}, set(), []
+    for path, name in find_meshes(paths):
+        if name in taken:
+            failures.append(f"{path}: its name {name!r} is already taken by another file")
+            continue
+        taken.add(name)
+        names[path] = name
+        if not writer.is_current(name, path):
+            todo.append(path)
+    added, last_commit = 0, time.monotonic()
+    outcomes = compute_many(todo, writer.params, solver, jobs, scheduler)
+    for outcome in progress(outcomes, len(todo)) if progress else outcomes:
+        if outcome.error:
+            failures.append(outcome.error)
+            if strict:
+                break
+            continue
+        path = outcome.path
+        writer.add(Entry(names[path], path.parent.name, str(path.resolve())), outcome.signature)
+        added += 1
+        if writer.pending >= commit_every or time.monotonic() - last_commit > _COMMIT_SECONDS:
+            writer.commit()
+            last_commit = time.monotonic()
+    return added, failures
 
 
 def _compute_on_cluster(

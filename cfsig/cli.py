@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import sys
-import time
 from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import replace
@@ -15,7 +14,7 @@ import click
 import numpy as np
 
 from . import __version__, render
-from .batch import compute_many
+from .batch import index_meshes
 from .conformal import SOLVERS
 from .errors import CfsigError
 from .evaluate import (
@@ -26,8 +25,7 @@ from .evaluate import (
     evaluate_collections,
     read_cla,
 )
-from .index import Entry, IndexReader, IndexWriter
-from .mesh import find_meshes
+from .index import IndexReader, IndexWriter
 from .params import DESCRIPTORS, Params
 from .report import write_report
 from .search import search
@@ -35,7 +33,6 @@ from .signature import mesh_and_signature, signature_file
 
 EXIT_ERROR = 1
 EXIT_SKIPPED = 3
-_COMMIT_SECONDS = 30.0
 RETRIEVAL_DESCRIPTOR = "cfhks"  # the default of index and evaluate: docs/descriptors.md
 _GRID_COLUMNS = 7  # tiles per row of a single query's --png grid
 
@@ -272,43 +269,14 @@ def index(
         descriptor = descriptor or (None if base else RETRIEVAL_DESCRIPTOR)
         params = _params(base, normalize=normalize, seed=seed, bins=bins, descriptor=descriptor)
         with IndexWriter(output, params) as writer:
-            added, skipped = _index_into(
-                writer, paths, solver, jobs, scheduler, strict, commit_every
+            bar = partial(_progress, what="indexing")
+            added, skipped = index_meshes(
+                writer, paths, solver, jobs, scheduler, strict, commit_every, bar
             )
     except CfsigError as exc:
         _fail(str(exc))
     click.echo(f"{output}: {added} meshes added or updated, {len(writer.known)} in the index")
     _report_skipped(skipped, strict)
-
-
-def _index_into(
-    writer: IndexWriter, paths, solver: str, jobs, scheduler, strict: bool, commit_every: int
-) -> tuple[int, list[str]]:
-    """Compute and commit the new and changed meshes; return their count and the failures."""
-    todo, names, seen, skipped = [], {}, set(), []
-    for path, name in find_meshes(paths):
-        if name in seen:
-            skipped.append(f"{path}: its name {name!r} is already taken by another file")
-            continue
-        seen.add(name)
-        names[path] = name
-        if not writer.is_current(name, path):
-            todo.append(path)
-    added, last_commit = 0, time.monotonic()
-    outcomes = compute_many(todo, writer.params, solver, jobs, scheduler)
-    for outcome in _progress(outcomes, len(todo), "indexing"):
-        if outcome.error:
-            skipped.append(outcome.error)
-            if strict:
-                break
-            continue
-        path = outcome.path
-        writer.add(Entry(names[path], path.parent.name, str(path.resolve())), outcome.signature)
-        added += 1
-        if writer.pending >= commit_every or time.monotonic() - last_commit > _COMMIT_SECONDS:
-            writer.commit()
-            last_commit = time.monotonic()
-    return added, skipped
 
 
 def _progress(iterable, total: int, what: str):
@@ -506,7 +474,7 @@ def _compute_folder(
     bar = partial(_progress, what=f"computing {params.descriptor}")
     collection, failures = compute_collection(folder, params, solver, jobs, strict, bar)
     skipped += failures
-    if not len(collection):
+    if not len(collection) or (strict and failures):
         _report_skipped(skipped, strict)
     return collection
 

@@ -28,13 +28,13 @@ folder (`compute_collection`) or read from an index (`collection_from_index`);
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from .batch import Outcome, compute_many
+from .batch import Progress, compute_many
 from .errors import MeshError
 from .index import IndexReader
 from .mesh import find_meshes
@@ -45,7 +45,6 @@ from .signature import signature_length
 MEASURES = ("NN", "FT", "ST", "E", "DCG", "mAP")
 RECALL_LEVELS = np.arange(1, 21) / 20.0
 _E_DEPTH = 32
-Progress = Callable[[Iterator[Outcome], int], Iterable[Outcome]]
 
 
 @dataclass(frozen=True)

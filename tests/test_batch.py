@@ -14,10 +14,10 @@ from crashing import signature_or_crash
 
 import cfsig
 from cfsig import batch
-from cfsig.batch import compute_many
+from cfsig.batch import compute_many, index_meshes
 from cfsig.cli import main
 from cfsig.errors import ClusterError
-from cfsig.index import IndexReader
+from cfsig.index import IndexReader, IndexWriter
 from cfsig.params import Params
 from cfsig.signature import signature_file
 
@@ -64,6 +64,46 @@ def test_a_crashing_worker_costs_only_its_file(meshes):
         if path.name not in ("crash.off", "broken.off"):
             expected = signature_file(path, Params()).histogram
             assert np.array_equal(outcomes[path.name].signature.histogram, expected)
+
+
+def test_index_meshes_adds_new_and_changed_files_only(meshes, tmp_path):
+    index = tmp_path / "library.h5"
+    seen = []
+
+    def progress(outcomes, total):
+        seen.append(total)
+        yield from outcomes
+
+    with IndexWriter(index, Params()) as writer:
+        added, failures = index_meshes(writer, [meshes], jobs=2, progress=progress)
+    assert added == 5 and seen == [6]
+    assert len(failures) == 1 and failures[0].startswith(f"{meshes / 'ring' / 'broken.off'}: ")
+    with IndexReader(index) as reader:
+        names, labels = list(reader.column("names")), list(reader.column("labels"))
+        entry = reader.entries(np.array([names.index("ring/d.off")]))[0]
+    assert sorted(names) == ["ring/d.off", "ring/e.off"] + [f"round/{c}.off" for c in "abc"]
+    assert sorted(set(labels)) == ["ring", "round"]
+    assert entry.path == str((meshes / "ring" / "d.off").resolve())
+    _write_off(meshes / "round" / "a.off", *torus(nu=20, nv=8))  # changed contents
+    with IndexWriter(index, Params()) as writer:
+        added, failures = index_meshes(writer, [meshes], jobs=1, progress=progress)
+    assert added == 1 and len(failures) == 1 and seen == [6, 2]  # a.off and broken.off again
+    with IndexReader(index) as reader:
+        assert len(reader) == 5
+        row = list(reader.column("names")).index("round/a.off")
+        stored = reader.signatures[row]
+    expected = signature_file(meshes / "round" / "a.off", Params()).histogram
+    assert np.allclose(stored, expected, atol=1e-6)
+
+
+def test_index_meshes_strict_and_taken_names(meshes, tmp_path):
+    with IndexWriter(tmp_path / "strict.h5", Params()) as writer:
+        added, failures = index_meshes(writer, [meshes], jobs=1, strict=True)
+    assert added == 0 and len(failures) == 1  # ring/broken.off is the first file computed
+    with IndexWriter(tmp_path / "twice.h5", Params()) as writer:
+        added, failures = index_meshes(writer, [meshes / "round", meshes / "round"], jobs=1)
+    assert added == 3 and len(failures) == 3
+    assert all("is already taken by another file" in line for line in failures)
 
 
 def test_missing_scheduler_is_a_cluster_error(meshes, monkeypatch):

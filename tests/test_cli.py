@@ -8,6 +8,7 @@ from click.testing import CliRunner
 from cfsig import __version__
 from cfsig.cli import EXIT_SKIPPED, main
 from cfsig.demo import make_demo_collection
+from cfsig.evaluate import compute_collection
 
 
 @pytest.fixture(scope="module")
@@ -168,3 +169,27 @@ def test_demo_command(tmp_path):
     result = _run("demo", "--out", tmp_path)
     assert result.exit_code == 0, result.output
     assert "30 in the index" in result.output and "queries" in result.output
+
+
+def test_evaluate_strict_stops_before_the_next_descriptor(collection, tmp_path, monkeypatch):
+    import cfsig.cli
+
+    folder = tmp_path / "set"
+    for name in ("capsule", "torus"):
+        (folder / name).mkdir(parents=True)
+        for i in range(2):
+            source = collection / name / f"{name}-{i}.off"
+            (folder / name / source.name).write_bytes(source.read_bytes())
+    (folder / "torus" / "bad.off").write_text("garbage")
+    computed = []
+
+    def recording(folder, params, *args):
+        computed.append(params.descriptor)
+        return compute_collection(folder, params, *args)
+
+    monkeypatch.setattr(cfsig.cli, "compute_collection", recording)
+    result = _run("evaluate", folder, "--descriptor", "cf,cfhks", "-j", "1", "--strict")
+    assert result.exit_code == 1 and "bad.off" in result.output
+    assert computed == ["cf"]
+    result = _run("evaluate", folder, "--descriptor", "cf,cfhks", "-j", "1")
+    assert result.exit_code == EXIT_SKIPPED and computed == ["cf", "cf", "cfhks"]
