@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import os
 import warnings
 from collections.abc import Iterable, Iterator
@@ -359,8 +360,9 @@ def _parse_plain_off(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
 
     The layout: "OFF" alone on the first line, the counts on the second, one vertex of three
     coordinates per line, then only triangles. The vertex block ends at the n_v-th line break
-    after the counts: NumPy parses it as floats and the rest as integers, with no Python object
-    per number.
+    after the counts: NumPy's C readers parse it as rows of floats (`numpy.loadtxt`, a sixth
+    faster than `numpy.fromstring` and bit-identical, benchmarks/parsers.py) and the rest as
+    integers, with no Python object per number.
     """
     lines = np.flatnonzero(np.frombuffer(data, dtype=np.uint8) == ord("\n"))
     if len(lines) < 2 or data[: lines[0]].strip().upper() != b"OFF":
@@ -373,19 +375,19 @@ def _parse_plain_off(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
     if len(counts) != 3 or n_v < 3 or n_f < 1 or len(lines) < n_v + 2:
         return None
     start, split = lines[1] + 1, lines[n_v + 1] + 1
-    with warnings.catch_warnings():  # NumPy 1.x warns and stops early where 2.x raises
-        warnings.simplefilter("ignore", DeprecationWarning)
+    with warnings.catch_warnings():  # a block that does not parse goes to the general parser
+        warnings.simplefilter("ignore")
         try:
-            vertices = np.fromstring(data[start:split], sep=" ")
+            vertices = np.loadtxt(io.BytesIO(data[start:split]), comments=None, ndmin=2)
             faces = np.fromstring(data[split:], dtype=np.int64, sep=" ")
         except ValueError:
             return None
-    if len(vertices) != 3 * n_v or len(faces) != 4 * n_f:
+    if vertices.shape != (n_v, 3) or len(faces) != 4 * n_f:
         return None
     faces = faces.reshape(-1, 4)
     if not np.all(faces[:, 0] == 3):
         return None
-    return vertices.reshape(-1, 3), faces[:, 1:]
+    return vertices, faces[:, 1:]
 
 
 def _parse_off_lines(data: bytes, n_v: int, n_f: int) -> tuple[np.ndarray, np.ndarray]:
@@ -437,8 +439,6 @@ def _parse_trimesh(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray]:
         import trimesh
     except ImportError:
         raise MissingDependencyError("reading OBJ, PLY and STL needs trimesh") from None
-    import io
-
     try:
         loaded = trimesh.load(io.BytesIO(data), file_type=suffix[1:], process=False, force="mesh")
         return np.asarray(loaded.vertices), np.asarray(loaded.faces)

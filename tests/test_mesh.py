@@ -46,6 +46,26 @@ def test_off_quads_comments_and_colours(tmp_path):
     assert len(mesh.vertices) == 8
 
 
+def test_off_layouts_parse_to_the_same_bits(tmp_path):
+    v, f = icosphere(2)
+    v = v * np.random.default_rng(0).lognormal(0, 3, (len(v), 1))  # exponents of every size
+    rows = [f"{float(x)!r} {y:.6e} {z:.6f}" for x, y, z in v]
+    triangles = [f"3 {a} {b} {c}" for a, b, c in f]
+    layouts = {
+        "plain": ["OFF", f"{len(v)} {len(f)} 0", *rows, *triangles],
+        "counts on the header line": [f"OFF {len(v)} {len(f)} 0", *rows, *triangles],
+        "vertex colours": ["OFF", f"{len(v)} {len(f)} 0", *(r + " 0.5 0.5 0.5" for r in rows)]
+        + triangles,
+    }
+    meshes = {}
+    for name, lines in layouts.items():
+        (tmp_path / f"{name}.off").write_text("\n".join(lines) + "\n")
+        meshes[name] = read_mesh(tmp_path / f"{name}.off")
+    expected = np.array([[float(t) for t in row.split()] for row in rows])
+    for mesh in meshes.values():
+        assert np.array_equal(mesh.vertices, expected) and np.array_equal(mesh.faces, f)
+
+
 @pytest.mark.parametrize("fmt", ["obj", "ply", "stl"])
 def test_other_formats_via_trimesh(tmp_path, fmt):
     v, f = icosphere(1)
