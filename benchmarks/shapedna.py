@@ -10,6 +10,9 @@ two like-for-like comparisons:
 - from the file: the same plus each package's own reader (lapy's ``TriaMesh.read_off``, cfsig's
   reading, checking and hashing inside ``signature_file``).
 
+Also, with each solver, the bare factorisation and solve of the mesh's pinned system alone: the
+speed-up over ShapeDNA that no implementation of the method with that solver can pass.
+
 Prints medians and the speed-up (lapy time / cfsig time) per mesh, overall and by vertex count.
 Needs the ``bench`` extra.
 
@@ -35,6 +38,7 @@ from pathlib import Path
 
 import common
 
+from cfsig.conformal import factorize, operators, pinned_system
 from cfsig.mesh import read_mesh
 from cfsig.params import Params
 from cfsig.signature import compute_signature, signature_file
@@ -56,11 +60,16 @@ def measure(path: Path, params: Params) -> dict:
     )[1]
     row = {"mesh": f"{path.parent.name}/{path.name}", "vertices": len(mesh.vertices),
            "shapedna memory": shapedna, "shapedna file": lapy_read + shapedna}  # fmt: skip
+    ops = operators(mesh, params.mollify)
+    system, keep = pinned_system(ops.laplacian, ops.labels)
+    rhs = (ops.curvature - ops.target)[keep]
     for solver in SOLVERS:
         row[f"{solver} memory"] = common.timed(partial(compute_signature, mesh, params, solver))[1]
         row[f"{solver} file"] = common.timed(partial(signature_file, path, params, solver))[1]
-        for start in PROTOCOLS:
-            row[f"speedup {solver} {start}"] = row[f"shapedna {start}"] / row[f"{solver} {start}"]
+        row[f"{solver} bare"] = common.timed(lambda s=solver: factorize(system, s)(rhs))[1]
+        for start in (*PROTOCOLS, "bare"):
+            base = "shapedna file" if start == "file" else "shapedna memory"
+            row[f"speedup {solver} {start}"] = row[base] / row[f"{solver} {start}"]
     return row
 
 
@@ -97,6 +106,13 @@ def main() -> None:
             cfsig_total = sum(r[f"{solver} {start}"] for r in rows)
             total = sum(r[f"shapedna {start}"] for r in rows) / cfsig_total
             print(f"Speed-up of the total CPU time from {start}, cfsig {solver}: {total:.3g}")
+    body = []
+    for solver in SOLVERS:
+        ceiling = [r[f"speedup {solver} bare"] for r in rows]
+        body.append([solver, med([r[f"{solver} bare"] for r in rows]), med(ceiling), max(ceiling)])
+    head = ["solver", "bare solve CPU s", "ShapeDNA / bare solve (median)", "(max)"]
+    print("\n### The ceiling: the bare solve alone against ShapeDNA from memory\n")
+    print(common.table(head, body))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
 
