@@ -27,6 +27,7 @@ bench: $(BIN)/python
 bench-perf: $(BIN)/python
 	$(BIN)/pip install -q -e '.[bench,cholmod,dask]'
 	$(BIN)/python benchmarks/per_mesh.py
+	$(BIN)/python benchmarks/parsers.py
 	$(BIN)/python benchmarks/solvers.py
 	$(BIN)/python benchmarks/shapedna.py
 	$(BIN)/python benchmarks/index_jobs.py
