@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import time
 from collections.abc import Callable, Sequence
@@ -19,6 +20,20 @@ def data_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--every", type=int, default=1, help="take every k-th mesh in sorted order (default all)"
     )
+
+
+def arguments(description: str) -> argparse.ArgumentParser:
+    """A parser with the data options (`data_arguments`) and ``--json``, for a script to extend."""
+    parser = argparse.ArgumentParser(description=description)
+    data_arguments(parser)
+    parser.add_argument("--json", type=Path, help="also write every measurement here")
+    return parser
+
+
+def save_rows(path: Path | None, rows: list[dict]) -> None:
+    """Write the measurements as JSON when ``--json`` was given."""
+    if path is not None:
+        path.write_text(json.dumps(rows, indent=1))
 
 
 def meshes(args: argparse.Namespace) -> list[Path]:

@@ -15,10 +15,7 @@ runs per block, then the median over the meshes.
 
 from __future__ import annotations
 
-import argparse
 import io
-import json
-import time
 from pathlib import Path
 
 import common
@@ -89,12 +86,8 @@ def _blocks(data: bytes) -> tuple[bytes, bytes]:
 
 def _cpu(func) -> tuple[object, float]:
     """A function's result and its median CPU seconds over three runs."""
-    runs = []
-    for _ in range(3):
-        start = time.process_time()
-        result = func()
-        runs.append(time.process_time() - start)
-    return result, common.median(runs)
+    runs = [common.timed(func) for _ in range(3)]
+    return runs[0][0], common.median([cpu for _, cpu, _ in runs])
 
 
 def measure(path: Path, compiled) -> dict:
@@ -120,10 +113,7 @@ def measure(path: Path, compiled) -> dict:
 
 def main() -> None:
     """Parse the options, time every parser on every mesh, print the table."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    common.data_arguments(parser)
-    parser.add_argument("--json", type=Path, help="also write every measurement here")
-    args = parser.parse_args()
+    args = common.arguments(__doc__.splitlines()[0]).parse_args()
     files, compiled = common.meshes(args), _compiled_parser()
     measure(files[0], compiled)  # compile (or load the cached machine code) before timing
     rows = [measure(path, compiled) for path in files]
@@ -140,8 +130,7 @@ def main() -> None:
     print("every parser's numbers equal numpy.fromstring's bit for bit\n")
     head = ["block", "parser", "CPU s (median)", "speed-up over fromstring (median)"]
     print(common.table(head, body))
-    if args.json:
-        args.json.write_text(json.dumps(rows, indent=1))
+    common.save_rows(args.json, rows)
 
 
 if __name__ == "__main__":

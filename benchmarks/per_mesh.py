@@ -18,9 +18,7 @@ os.environ.update(
     dict.fromkeys(["OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"], "1")
 )
 
-import argparse
 import hashlib
-import json
 from collections import defaultdict
 from pathlib import Path
 
@@ -141,10 +139,8 @@ def report(rows: list[dict], solvers: list[str]) -> str:
 
 def main() -> None:
     """Parse the options, measure every mesh with every solver family, print the tables."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    common.data_arguments(parser)
+    parser = common.arguments(__doc__.splitlines()[0])
     parser.add_argument("--solvers", nargs="+", default=["scipy", "eigen", "cholmod"])
-    parser.add_argument("--json", type=Path, help="also write every measurement here")
     args = parser.parse_args()
     solvers = [s for s in args.solvers if s in available_solvers()]
     files, params = common.meshes(args), Params()
@@ -153,8 +149,7 @@ def main() -> None:
     rows = [measure(path, params, s) for path in files for s in solvers]
     print(f"{len(files)} meshes from {args.data}, solvers {', '.join(solvers)}, one thread\n")
     print(report(rows, solvers))
-    if args.json:
-        args.json.write_text(json.dumps(rows, indent=1))
+    common.save_rows(args.json, rows)
 
 
 if __name__ == "__main__":

@@ -28,10 +28,8 @@ os.environ.update(
     dict.fromkeys(["OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"], "1")
 )
 
-import argparse
 import contextlib
 import io
-import json
 from collections import defaultdict
 from functools import partial
 from pathlib import Path
@@ -75,10 +73,7 @@ def measure(path: Path, params: Params) -> dict:
 
 def main() -> None:
     """Parse the options, time both on every mesh, print the tables."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    common.data_arguments(parser)
-    parser.add_argument("--json", type=Path, help="also write every measurement here")
-    args = parser.parse_args()
+    args = common.arguments(__doc__.splitlines()[0]).parse_args()
     files, params = common.meshes(args), Params()
     measure(files[0], params)  # warm up imports
     rows = [measure(path, params) for path in files]
@@ -113,8 +108,7 @@ def main() -> None:
     head = ["solver", "bare solve CPU s", "ShapeDNA / bare solve (median)", "(max)"]
     print("\n### The ceiling: the bare solve alone against ShapeDNA from memory\n")
     print(common.table(head, body))
-    if args.json:
-        args.json.write_text(json.dumps(rows, indent=1))
+    common.save_rows(args.json, rows)
 
 
 if __name__ == "__main__":

@@ -18,8 +18,6 @@ os.environ.update(
     dict.fromkeys(["OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"], "1")
 )
 
-import argparse
-import json
 import multiprocessing
 import subprocess
 import sys
@@ -137,10 +135,7 @@ def measure(path: Path, names: list[str], child: ProcessPoolExecutor) -> dict:
 
 def main() -> None:
     """Parse the options, time every installed method on every mesh, print the table."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    common.data_arguments(parser)
-    parser.add_argument("--json", type=Path, help="also write every measurement here")
-    args = parser.parse_args()
+    args = common.arguments(__doc__.splitlines()[0]).parse_args()
     isolated = [name for name in ISOLATED if installed(METHODS[name][0], isolated=True)]
     names = [
         n for n, (m, _) in METHODS.items() if n in isolated or (n not in ISOLATED and installed(m))
@@ -166,8 +161,7 @@ def main() -> None:
         print(f"\nMeshes with 20k unknowns or more ({len(big)}), median CPU s:\n")
         print(common.table(["method", "median CPU s"],
                            [[name, med([r[name] for r in big])] for name in names]))  # fmt: skip
-    if args.json:
-        args.json.write_text(json.dumps(rows, indent=1))
+    common.save_rows(args.json, rows)
 
 
 if __name__ == "__main__":

@@ -174,15 +174,15 @@ def index_meshes(
     IndexFileError
         A commit failed.
     """
-    todo, names, taken, failures = [], {}, set(), []
+    todo: dict[Path, str] = {}  # the files to compute, and their names
+    taken, failures = set(), []
     for path, name in find_meshes(paths):
         if name in taken:
             failures.append(f"{path}: its name {name!r} is already taken by another file")
             continue
         taken.add(name)
-        names[path] = name
         if not writer.is_current(name, path):
-            todo.append(path)
+            todo[path] = name
     added, last_commit = 0, time.monotonic()
     outcomes = compute_many(todo, writer.params, solver, jobs, scheduler)
     for outcome in progress(outcomes, len(todo)) if progress else outcomes:
@@ -192,7 +192,7 @@ def index_meshes(
                 break
             continue
         path = outcome.path
-        writer.add(Entry(names[path], path.parent.name, str(path.resolve())), outcome.signature)
+        writer.add(Entry(todo[path], path.parent.name, str(path.resolve())), outcome.signature)
         added += 1
         if writer.pending >= commit_every or time.monotonic() - last_commit > _COMMIT_SECONDS:
             writer.commit()
