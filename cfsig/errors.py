@@ -23,3 +23,7 @@ class MissingDependencyError(CfsigError):
 
 class ClusterError(CfsigError):
     """A Dask cluster cannot be reached."""
+
+
+class StageLimitError(MeshError):
+    """An isolated stage (`cfsig.isolate`) ran out of time or memory, crashed or failed."""

@@ -34,12 +34,16 @@ class Mesh:
     edges : geometry.Edges or None
         The faces' `geometry.mesh_edges`, kept from the non-manifold check of `clean_mesh` so
         that the Laplacian need not sort the half-edges again; None when not known.
+    route : str
+        Which route of `cfsig.repair.repair_mesh` the mesh took: ``"clean"`` (one closed
+        manifold, as read), ``"repaired"``, ``"proxy"`` or ``"unrepaired"``.
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     repairs: tuple[str, ...] = ()
     edges: Edges | None = None
+    route: str = "clean"
 
 
 def read_mesh(path: str | os.PathLike) -> Mesh:

@@ -6,6 +6,7 @@ import json
 from dataclasses import asdict, dataclass, fields
 
 DESCRIPTORS = ("cf", "cfhks")
+REPAIR_MODES = ("auto", "off", "proxy")
 
 
 @dataclass(frozen=True)
@@ -37,6 +38,11 @@ class Params:
     mollify : float
         Intrinsic mollification of degenerate triangles, relative to the mean edge length
         (Sharp and Crane 2020); 0 disables it.
+    repair : str
+        What to do with a mesh that is not one closed manifold (one of `REPAIR_MODES`;
+        `cfsig.repair.repair_mesh`): ``"auto"`` repairs it locally or replaces it by a proxy
+        of its outer surface, ``"proxy"`` always takes the proxy, ``"off"`` solves each part
+        as read. Clean closed manifolds are never changed.
     """
 
     descriptor: str = "cf"
@@ -47,12 +53,17 @@ class Params:
     seed: int = 0
     normalize: bool = False
     mollify: float = 1e-5
+    repair: str = "auto"
 
     def __post_init__(self) -> None:
         if self.bins < 1 or self.samples_per_face < 0 or not self.low < self.high:
             raise ValueError(f"invalid parameters: {self}")
         if self.mollify < 0:
             raise ValueError("mollify must be >= 0")
+        if self.repair not in REPAIR_MODES:
+            raise ValueError(
+                f"unknown repair mode {self.repair!r}; choose from {', '.join(REPAIR_MODES)}"
+            )
         if self.descriptor not in DESCRIPTORS:
             raise ValueError(
                 f"unknown descriptor {self.descriptor!r}; choose from {', '.join(DESCRIPTORS)}"
@@ -71,9 +82,11 @@ class Params:
     def from_json(cls, text: str) -> Params:
         """Parse what `to_json` wrote; unknown keys raise ``ValueError``.
 
-        An index written before descriptors had names holds the paper's ``"cf"``, the default.
+        An index written before descriptors had names holds the paper's ``"cf"``, the default;
+        one written before the repair stage existed was made without it, ``repair="off"``.
         """
         data = json.loads(text)
+        data.setdefault("repair", "off")
         known = {f.name for f in fields(cls)}
         unknown = set(data) - known
         if unknown:

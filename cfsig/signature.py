@@ -20,6 +20,7 @@ from .conformal import ConformalFactor, conformal_factor
 from .errors import MeshError, SolverError
 from .mesh import Mesh, parse_mesh, read_bytes
 from .params import Params
+from .repair import repair_mesh
 
 
 @dataclass(frozen=True)
@@ -38,7 +39,10 @@ class Signature:
     curvature_error : float
         Paper section 3.4, in units of pi.
     repairs : tuple of str
-        Repairs made on reading, in words.
+        Repairs made on reading and by the repair stage, in words.
+    route : str
+        The repair stage's route (`cfsig.repair.repair_mesh`): ``"clean"``, ``"repaired"``,
+        ``"proxy"`` or ``"unrepaired"``.
     seconds : float
         Wall time from reading to histogram.
     sha256 : str
@@ -52,6 +56,7 @@ class Signature:
     n_components: int
     curvature_error: float
     repairs: tuple[str, ...]
+    route: str
     seconds: float
     sha256: str = ""
 
@@ -184,12 +189,13 @@ def signature_of(cf: ConformalFactor, faces: np.ndarray, params: Params) -> np.n
 
 
 def compute_signature(mesh: Mesh, params: Params, solver: str = "auto") -> Signature:
-    """Conformal factor and signature of an in-memory mesh.
+    """Repair, conformal factor and signature of an in-memory mesh.
 
     Parameters
     ----------
     mesh : Mesh
-        A checked mesh, as `read_mesh` or `clean_mesh` return.
+        A checked mesh, as `read_mesh` or `clean_mesh` return; it goes through
+        `cfsig.repair.repair_mesh` with ``params.repair`` first.
     params : Params
         Signature parameters.
     solver : {"auto", "cholmod", "eigen", "scipy"}
@@ -201,16 +207,24 @@ def compute_signature(mesh: Mesh, params: Params, solver: str = "auto") -> Signa
 
     Raises
     ------
+    MeshError
+        The repair stage failed (`cfsig.repair.repair_mesh`).
     SolverError, MissingDependencyError
         As `conformal_factor` and `signature_of`.
     """
+    return _repair_and_sign(mesh, params, solver)[1]
+
+
+def _repair_and_sign(mesh: Mesh, params: Params, solver: str) -> tuple[Mesh, Signature]:
+    """`compute_signature`, also returning the repaired mesh that phi lives on."""
     start = time.perf_counter()
+    mesh = repair_mesh(mesh, params.repair)
     cf = conformal_factor(mesh, params.mollify, solver)
     hist = signature_of(cf, mesh.faces, params)
     repairs = mesh.repairs
     if cf.mollified > 0:
         repairs += (f"mollified degenerate triangles (edges +{cf.mollified:.3g})",)
-    return Signature(
+    return mesh, Signature(
         hist,
         cf.phi,
         len(mesh.vertices),
@@ -218,6 +232,7 @@ def compute_signature(mesh: Mesh, params: Params, solver: str = "auto") -> Signa
         cf.n_components,
         cf.curvature_error,
         repairs,
+        mesh.route,
         time.perf_counter() - start,
     )
 
@@ -264,7 +279,8 @@ def mesh_and_signature(
     Returns
     -------
     mesh : Mesh
-        The mesh as read and repaired; ``signature.phi`` has one value per vertex of it.
+        The mesh as read and through the repair stage; ``signature.phi`` has one value per
+        vertex of it.
     signature : Signature
         As `signature_file` returns.
 
@@ -277,8 +293,8 @@ def mesh_and_signature(
     data = read_bytes(path)
     mesh = parse_mesh(data, path)
     try:
-        sig = compute_signature(mesh, params, solver)
-    except SolverError as exc:
+        mesh, sig = _repair_and_sign(mesh, params, solver)
+    except (MeshError, SolverError) as exc:
         raise MeshError(f"{path}: {exc}") from None
     seconds = time.perf_counter() - start
     return mesh, replace(sig, seconds=seconds, sha256=hashlib.sha256(data).hexdigest())
