@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+from collections import Counter
 from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import replace
@@ -26,7 +27,7 @@ from .evaluate import (
     read_cla,
 )
 from .index import IndexReader, IndexWriter
-from .params import DESCRIPTORS, Params
+from .params import DESCRIPTORS, REPAIR_MODES, Params
 from .report import write_report
 from .search import search
 from .signature import mesh_and_signature, signature_file
@@ -44,6 +45,14 @@ _params_options = [
     ),
     click.option("--seed", type=int, default=None, help="Seed of the surface sampling [0]."),
     click.option("--bins", type=int, default=None, help="Histogram bins [200]."),
+    click.option(
+        "--repair",
+        type=click.Choice(REPAIR_MODES),
+        default=None,
+        help="A mesh that is not one closed manifold: repair it, else rebuild its outer surface "
+        "(auto); always rebuild it (proxy); solve each part as read (off) [auto, or an "
+        "existing index's own]. Clean closed manifolds are never changed.",
+    ),
 ]
 _descriptor_option = click.option(
     "--descriptor",
@@ -142,7 +151,7 @@ def main() -> None:
     help="Plot the signature histograms overlaid.",
 )
 def compute(
-    meshes, normalize, seed, bins, descriptor, solver, as_json, save, png, ply, hist
+    meshes, normalize, seed, bins, repair, descriptor, solver, as_json, save, png, ply, hist
 ) -> None:
     """Compute the conformal factor and signature of each mesh.
 
@@ -154,7 +163,9 @@ def compute(
     """
     if ply and len(meshes) > 1:
         raise click.UsageError("--ply writes one mesh: give a single MESH")
-    params = _params(normalize=normalize, seed=seed, bins=bins, descriptor=descriptor)
+    params = _params(
+        normalize=normalize, seed=seed, bins=bins, repair=repair, descriptor=descriptor
+    )
     if hist and params.descriptor != "cf":
         raise click.UsageError("--hist plots the histograms of the cf descriptor")
     rows, failed, drawn = [], [], []
@@ -184,7 +195,7 @@ def compute(
                 f"{path}: {row['vertices']} vertices, {row['faces']} faces, "
                 f"{row['components']} component(s), phi in [{row['phi_min']:.3f}, "
                 f"{row['phi_max']:.3f}], curvature error {row['curvature_error']:.2e} pi, "
-                f"{row['seconds']:.3f} s"
+                f"{row['seconds']:.3f} s" + ("" if sig.route == "clean" else f", {sig.route}")
             )
     if as_json:
         click.echo(json.dumps(rows, indent=2))
@@ -205,6 +216,7 @@ def _describe(path: Path, sig) -> dict:
         "phi_max": high,
         "curvature_error": sig.curvature_error,
         "seconds": sig.seconds,
+        "route": sig.route,
         "repairs": list(sig.repairs),
     }
 
@@ -244,7 +256,18 @@ def _report_errors(errors: list[str]) -> None:
     help="Commit to the index file after this many meshes (and every 30 s).",
 )
 def index(
-    paths, output, normalize, seed, bins, descriptor, solver, jobs, scheduler, strict, commit_every
+    paths,
+    output,
+    normalize,
+    seed,
+    bins,
+    repair,
+    descriptor,
+    solver,
+    jobs,
+    scheduler,
+    strict,
+    commit_every,
 ) -> None:
     """Index mesh files and folders (recursively: OFF, OBJ, PLY, STL) into an HDF5 file.
 
@@ -267,23 +290,38 @@ def index(
             with IndexReader(output) as reader:
                 base = reader.params
         descriptor = descriptor or (None if base else RETRIEVAL_DESCRIPTOR)
-        params = _params(base, normalize=normalize, seed=seed, bins=bins, descriptor=descriptor)
+        params = _params(
+            base, normalize=normalize, seed=seed, bins=bins, repair=repair, descriptor=descriptor
+        )
         with IndexWriter(output, params) as writer:
-            bar = partial(_progress, what="indexing")
+            routes: Counter[str] = Counter()
+            bar = partial(_progress, what="indexing", routes=routes)
             added, skipped = index_meshes(
                 writer, paths, solver, jobs, scheduler, strict, commit_every, bar
             )
     except CfsigError as exc:
         _fail(str(exc))
     click.echo(f"{output}: {added} meshes added or updated, {len(writer.known)} in the index")
+    if routes:
+        click.echo(_format_routes(routes))
     _report_skipped(skipped, strict)
 
 
-def _progress(iterable, total: int, what: str):
-    """A tqdm progress bar on standard error."""
+def _progress(iterable, total: int, what: str, routes: Counter[str]):
+    """A tqdm progress bar on standard error, counting the repair routes of what passes."""
     from tqdm import tqdm
 
-    return tqdm(iterable, total=total, desc=what, unit="mesh", file=sys.stderr, leave=False)
+    bar = tqdm(iterable, total=total, desc=what, unit="mesh", file=sys.stderr, leave=False)
+    for outcome in bar:
+        if outcome.signature is not None:
+            routes[outcome.signature.route] += 1
+        yield outcome
+
+
+def _format_routes(routes: Counter[str]) -> str:
+    """How many meshes took each route of the repair stage, in one line."""
+    order = ("clean", "repaired", "proxy", "unrepaired")
+    return "repair: " + ", ".join(f"{routes[r]} {r}" for r in order if routes[r])
 
 
 @main.command()
@@ -388,6 +426,7 @@ def evaluate(
     normalize,
     seed,
     bins,
+    repair,
     solver,
     jobs,
     strict,
@@ -424,14 +463,20 @@ def evaluate(
     except ValueError as exc:  # names the file and line already
         _fail(str(exc))
     skipped: list[str] = []
+    routes: Counter[str] = Counter()  # of the first descriptor: the others' are the same
     try:
         if index_file:
             collections = dict([collection_from_index(index_file)])
         else:
             collections = {}
             for name in wanted:
-                params = _params(normalize=normalize, seed=seed, bins=bins, descriptor=name)
-                collections[name] = _compute_folder(folder, params, solver, jobs, strict, skipped)
+                params = _params(
+                    normalize=normalize, seed=seed, bins=bins, repair=repair, descriptor=name
+                )
+                counted = routes if not collections else Counter()
+                collections[name] = _compute_folder(
+                    folder, params, solver, jobs, strict, skipped, counted
+                )
     except CfsigError as exc:
         _fail(str(exc))
     try:
@@ -441,18 +486,28 @@ def evaluate(
     if len(results) == 1:
         (result,) = results.values()
         report = result.report
-        click.echo(json.dumps(report.to_dict(), indent=2) if as_json else _format_report(report))
+        if as_json:
+            computed = {"repair": dict(routes)} if folder else {}
+            click.echo(json.dumps({**report.to_dict(), **computed}, indent=2))
+        else:
+            click.echo(_format_report(report))
         if result.seconds_per_mesh is not None and not as_json:
             click.echo(f"median seconds per mesh: {result.seconds_per_mesh:.3f}")
         _evaluate_pictures(plot, report_dir, result)
     elif as_json:
         out = {
-            name: {**r.report.to_dict(), "seconds_per_mesh": r.seconds_per_mesh}
+            name: {
+                **r.report.to_dict(),
+                "seconds_per_mesh": r.seconds_per_mesh,
+                "repair": dict(routes),
+            }
             for name, r in results.items()
         }
         click.echo(json.dumps(out, indent=2))
     else:
         click.echo(_format_side_by_side(results))
+    if routes and not as_json:
+        click.echo(_format_routes(routes))
     _report_skipped(skipped, strict)
 
 
@@ -468,10 +523,16 @@ def _descriptor_list(text: str | None) -> list[str]:
 
 
 def _compute_folder(
-    folder: Path, params: Params, solver: str, jobs, strict: bool, skipped: list[str]
+    folder: Path,
+    params: Params,
+    solver: str,
+    jobs,
+    strict: bool,
+    skipped: list[str],
+    routes: Counter[str],
 ) -> Collection:
     """A folder's collection under a progress bar; failures go to ``skipped``, exit if none."""
-    bar = partial(_progress, what=f"computing {params.descriptor}")
+    bar = partial(_progress, what=f"computing {params.descriptor}", routes=routes)
     collection, failures = compute_collection(folder, params, solver, jobs, strict, bar)
     skipped += failures
     if not len(collection) or (strict and failures):

@@ -125,7 +125,8 @@ def test_query_errors(tmp_path, collection):
 def test_evaluate_folder_index_and_cla(collection, built_index, tmp_path):
     result = _run("evaluate", collection, "--json", "-j", "1")
     report = json.loads(result.stdout)
-    assert set(report) == {"measures", "per_class", "precision_recall", "count"}
+    assert set(report) == {"measures", "per_class", "precision_recall", "count", "repair"}
+    assert report["repair"] == {"clean": 18}  # the generated meshes are closed manifolds
     assert set(report["measures"]) == {"NN", "FT", "ST", "E", "DCG", "mAP"}
     assert report["count"] == 18 and len(report["precision_recall"]) == 20
     from_index = json.loads(_run("evaluate", "--index", built_index, "--json").stdout)
