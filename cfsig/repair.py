@@ -42,6 +42,8 @@ MAX_PARTS = 64
 # iso-surface outside the input, in cells.
 PROXY_CELLS = 64
 PROXY_OFFSET = 0.5
+# Marching cubes gives more faces the larger the surface; the proxy is simplified to this many.
+PROXY_FACES = 8000
 
 
 def repair_mesh(mesh: Mesh, mode: str = "auto", limits: Limits | None = None) -> Mesh:
@@ -352,6 +354,8 @@ def proxy_mesh(mesh: Mesh, limits: Limits) -> Mesh:
 def offset_surface(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The iso-surface just outside a triangle soup, on a grid of `PROXY_CELLS` cells.
 
+    Simplified by quadric edge collapses (fast-simplification) to `PROXY_FACES` faces.
+
     Parameters
     ----------
     vertices : (n, 3) float64
@@ -374,7 +378,14 @@ def offset_surface(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
         vertices, oriented, PROXY_OFFSET * cell, PROXY_CELLS,
         igl.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER,
     )  # fmt: skip
-    return np.asarray(result[0], dtype=np.float64), np.asarray(result[1], dtype=np.int64)
+    vertices, faces = result[0], result[1]
+    if len(faces) > PROXY_FACES:
+        import fast_simplification
+
+        vertices, faces = fast_simplification.simplify(
+            vertices, faces.astype(np.int32), target_count=PROXY_FACES
+        )
+    return np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
 
 
 def _parts(ends: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:

@@ -1,0 +1,634 @@
+"""Messy copies of clean closed meshes, and retrieval on them: what cfsig's repair must undo.
+
+Real models from the web are triangle soups, cut into parts, holed, doubled, finned and full of
+hidden inner parts. This script writes, for every clean mesh of a labelled collection
+(``<class>/<file>``) and every kind of mess, one messy copy ``OUT/<kind>/<class>/<file>``, then
+measures how well each copy's signature finds its own clean original:
+
+    python benchmarks/messy.py write --out DIR     # the messy copies and their check figures
+    python benchmarks/messy.py measure --out DIR   # signatures and retrieval of those copies
+    python benchmarks/messy.py run                 # both, in a temporary folder by default
+
+Kinds (`KINDS`; each copy is seeded by its file's name and the kind, so reruns are identical):
+
+- ``soup``: every face has its own three vertices, faces shuffled, binary STL.
+- ``gaps``: cut into 2-4 parts by planes, each part its own vertices, moved 0.5% of the bounding
+  box diagonal away from its cut.
+- ``holes``: 3-6 holes of radius 1.5-3% of the diagonal, at most 5% of the faces.
+- ``fins``: 5% of the faces duplicated (some flipped), 10% flipped, 3-6 fins (a third face on an
+  edge) and one small closed sphere inside the shape.
+- ``inner``: 2-4 closed spheres or boxes hidden inside the shape.
+- ``overlap``: cut by a plane into two parts that overlap in a band of 3% of the diagonal, one
+  moved by 0.1% of the diagonal so the bands interpenetrate.
+
+``measure`` computes the clean signatures (the clean index) and the messy ones with
+`cfsig.batch.compute_many`; each messy copy queries the clean index by L1 and its original's
+rank is counted (ties pessimistically). The messy collection (file i replaced by its copy of
+kind i mod K, files in sorted order) and each single-kind collection are evaluated leave-one-out
+like the clean one. Files that fail are listed; they rank after every mesh (n + 1) and are left
+out of the collections they belong to.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import io
+import shlex
+import sys
+import tempfile
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import common
+import igl
+import numpy as np
+
+from cfsig.batch import compute_many
+from cfsig.evaluate import evaluate_distances
+from cfsig.params import DESCRIPTORS, REPAIR_MODES, Params
+from cfsig.search import l1_distances
+
+Mesh = tuple[np.ndarray, np.ndarray]  # vertices (n, 3) float64, faces (m, 3) int64
+SUFFIXES = (".off", ".obj", ".ply", ".stl")
+MARGIN = 1.25  # an inner part's centre is at least MARGIN times its radius from the surface
+MEASURES = ("NN", "FT", "ST", "mAP")
+
+
+def vector(signature) -> np.ndarray:
+    """The signature's vector (the one place that names the attribute)."""
+    return signature.histogram
+
+
+# --- small geometry -----------------------------------------------------------------------
+
+
+def diagonal(vertices: np.ndarray) -> float:
+    """The length of the bounding box diagonal."""
+    return float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+
+
+def centroids(mesh: Mesh) -> np.ndarray:
+    """Face centroids (m, 3)."""
+    vertices, faces = mesh
+    return vertices[faces].mean(axis=1)
+
+
+def face_normals(mesh: Mesh) -> np.ndarray:
+    """Unit face normals (m, 3); zero for degenerate faces."""
+    vertices, faces = mesh
+    tri = vertices[faces]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    length = np.linalg.norm(cross, axis=1, keepdims=True)
+    return np.divide(cross, length, out=np.zeros_like(cross), where=length > 0)
+
+
+def unit_vector(rng: np.random.Generator) -> np.ndarray:
+    """A random direction, uniform on the sphere."""
+    v = rng.normal(size=3)
+    return v / np.linalg.norm(v)
+
+
+def rotation(rng: np.random.Generator) -> np.ndarray:
+    """A random rotation matrix (QR of a Gaussian matrix, determinant +1)."""
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q = q * np.sign(np.diag(r))
+    return q if np.linalg.det(q) > 0 else -q
+
+
+def submesh(mesh: Mesh, keep: np.ndarray, shift: np.ndarray | None = None) -> Mesh:
+    """The faces ``keep`` (mask or indices) with their own copies of their vertices, shifted."""
+    vertices, faces = mesh
+    chosen = faces[keep]
+    used, inverse = np.unique(chosen, return_inverse=True)
+    moved = vertices[used] + (0.0 if shift is None else shift)
+    return moved, inverse.reshape(chosen.shape).astype(np.int64)
+
+
+def concatenate(meshes: Sequence[Mesh]) -> Mesh:
+    """One mesh made of several, vertex indices offset."""
+    offsets = np.cumsum([0] + [len(v) for v, _ in meshes[:-1]])
+    vertices = np.vstack([v for v, _ in meshes])
+    faces = np.vstack([f + o for (_, f), o in zip(meshes, offsets, strict=True)])
+    return vertices, faces.astype(np.int64)
+
+
+def icosphere(center: np.ndarray, radius: float, subdivisions: int = 2) -> Mesh:
+    """A closed, outward-oriented icosphere."""
+    t = (1.0 + 5.0**0.5) / 2.0
+    v = np.array(
+        [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t]]
+        + [[0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]],
+        dtype=np.float64,
+    )
+    f = np.array(
+        [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4]]
+        + [[11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8]]
+        + [[3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]],
+        dtype=np.int64,
+    )
+    v, f = igl.upsample(v, f, subdivisions)
+    v = v / np.linalg.norm(v, axis=1, keepdims=True)
+    return center + radius * v, f.astype(np.int64)
+
+
+def box(center: np.ndarray, radius: float, rng: np.random.Generator) -> Mesh:
+    """A closed, outward-oriented cube of circumradius ``radius``, randomly rotated."""
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    f = np.array(
+        [[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1]]
+        + [[2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]],
+        dtype=np.int64,
+    )
+    v, f = igl.upsample(corners, f, 1)
+    return center + (radius / 3**0.5) * v @ rotation(rng).T, f.astype(np.int64)
+
+
+def inner_centers(
+    mesh: Mesh, radii: Sequence[float], rng: np.random.Generator
+) -> tuple[list[np.ndarray], list[float]]:
+    """Centres strictly inside the shape for parts of the given radii, apart from each other.
+
+    Candidates are random points of the bounding box and points moved off random faces along
+    their normals, both ways; a candidate is inside when its generalised winding number exceeds
+    0.5 in absolute value (whatever the orientation), and it fits a part when its distance to
+    the surface is at least `MARGIN` radii and it does not touch the parts already placed. A
+    shape too thin for a radius gets the largest part that fits at its deepest free candidate
+    (the radii returned are those used); a part with no free candidate at all is left out.
+    """
+    vertices, faces = mesh
+    diag = diagonal(vertices)
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    picks = rng.integers(len(faces), size=4000)
+    depth = rng.uniform(0.002, 0.1, size=(4000, 1)) * diag
+    points = np.vstack(
+        [
+            rng.uniform(lo, hi, size=(4000, 3)),
+            centroids(mesh)[picks] - depth * face_normals(mesh)[picks],
+            centroids(mesh)[picks] + depth * face_normals(mesh)[picks],
+        ]
+    )
+    inside = np.abs(igl.fast_winding_number(vertices, faces, points)) > 0.5
+    points = points[inside]
+    dist = np.sqrt(igl.point_mesh_squared_distance(points, vertices, faces)[0])
+    placed, used = [], []
+    for radius in radii:
+        free = dist.copy()
+        for c, r in zip(placed, used, strict=True):
+            free = np.minimum(free, np.linalg.norm(points - c, axis=1) - r)
+        if len(free) == 0 or free.max() <= 0:
+            continue
+        fits = np.flatnonzero(free >= MARGIN * radius)
+        if len(fits):
+            i = int(rng.choice(fits))
+        else:
+            i = int(np.argmax(free))
+            radius = float(free[i] / MARGIN)
+        placed.append(points[i])
+        used.append(radius)
+    return placed, used
+
+
+# --- the kinds of mess ----------------------------------------------------------------------
+
+
+def soup(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """Every face with its own three vertices, faces in random order."""
+    vertices, faces = mesh
+    shuffled = faces[rng.permutation(len(faces))]
+    return vertices[shuffled].reshape(-1, 3), np.arange(3 * len(faces)).reshape(-1, 3)
+
+
+def _split(mesh: Mesh, part: np.ndarray, rng: np.random.Generator) -> tuple:
+    """Cut faces by a random plane through one's centroid: (below, above, normal, offset).
+
+    A face is above when its centroid is (``centroid @ normal > offset``).
+
+    The plane is retried until each side holds at least a tenth of the part's faces.
+    """
+    c = centroids(mesh)[part]
+    best = None
+    for _ in range(100):
+        normal = unit_vector(rng)
+        offset = float(c[rng.integers(len(c))] @ normal)
+        side = c @ normal > offset
+        balance = min(side.sum(), (~side).sum())
+        if best is None or balance > best[0]:
+            best = (balance, side, normal, offset)
+        if balance >= 0.1 * len(part):
+            break
+    _, side, normal, offset = best
+    return part[~side], part[side], normal, offset
+
+
+def gaps(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """2-4 parts cut by planes, each with its own vertices, moved apart by small gaps.
+
+    The largest part is cut again until there are enough; each part then moves by 0.5% of the
+    diagonal in a random direction on the far side of its cuts.
+    """
+    diag = diagonal(mesh[0])
+    parts = [(np.arange(len(mesh[1])), np.zeros(3))]  # faces, sum of outward cut normals
+    for _ in range(int(rng.integers(2, 5)) - 1):
+        faces, away = parts.pop(int(np.argmax([len(p) for p, _ in parts])))
+        below, above, normal, _ = _split(mesh, faces, rng)
+        parts += [(below, away - normal), (above, away + normal)]
+    pieces = []
+    for faces, away in parts:
+        direction = away / np.linalg.norm(away) + 0.5 * unit_vector(rng)
+        shift = 0.005 * diag * direction / np.linalg.norm(direction)
+        pieces.append(submesh(mesh, faces, shift))
+    return concatenate(pieces)
+
+
+def holes(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """3-6 holes: the faces whose centroids are near a random seed face's, at most 5% overall.
+
+    A hole that would pass the budget takes only the faces nearest its seed. A hole that would
+    cut the surface in two (around a thin part) is drawn again elsewhere, its radius halved
+    after every 10 such draws; a hole that still cuts after 30 draws is not made.
+    """
+    vertices, faces = mesh
+    diag, c = diagonal(vertices), centroids(mesh)
+    removed = np.zeros(len(faces), dtype=bool)
+    budget, parts = int(0.05 * len(faces)), components(faces)
+    for _ in range(int(rng.integers(3, 7))):
+        radius = rng.uniform(0.015, 0.03) * diag
+        for attempt in range(30):
+            seed = int(rng.choice(np.flatnonzero(~removed)))
+            dist = np.linalg.norm(c - c[seed], axis=1)
+            near = np.flatnonzero((dist < radius * 0.5 ** (attempt // 10)) & ~removed)
+            near = near[np.argsort(dist[near])][: budget - int(removed.sum())]
+            trial = removed.copy()
+            trial[near] = True
+            if components(faces[~trial]) == parts:
+                removed = trial
+                break
+    return submesh(mesh, ~removed)
+
+
+def fins(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """Duplicated and flipped faces, 3-6 fins and one small sphere inside.
+
+    5% of the faces are repeated (half of the copies with reversed order), another 10% are
+    reversed, and each fin is a new triangle on an edge of a further face whose third vertex
+    sits 1% of the diagonal off the edge's midpoint along that face's normal.
+    """
+    vertices, faces = mesh
+    m, diag = len(faces), diagonal(vertices)
+    order = rng.permutation(m)
+    n_dup, n_flip, n_fins = round(0.05 * m), round(0.10 * m), int(rng.integers(3, 7))
+    dup = faces[order[:n_dup]].copy()
+    reverse = rng.random(n_dup) < 0.5
+    dup[reverse] = dup[reverse, ::-1]
+    out = faces.copy()
+    flipped = order[n_dup : n_dup + n_flip]
+    out[flipped] = out[flipped, ::-1]
+    hosts = order[n_dup + n_flip : n_dup + n_flip + n_fins]
+    corner = rng.integers(3, size=n_fins)
+    a, b = faces[hosts, corner], faces[hosts, (corner + 1) % 3]
+    tips = (vertices[a] + vertices[b]) / 2 + 0.01 * diag * face_normals(mesh)[hosts]
+    tip_index = len(vertices) + np.arange(n_fins)
+    fin_faces = np.column_stack([b, a, tip_index])
+    body = (np.vstack([vertices, tips]), np.vstack([out, dup, fin_faces]))
+    center, radius = inner_centers(mesh, [0.02 * diag], rng)
+    return concatenate([body, *(icosphere(x, r) for x, r in zip(center, radius, strict=True))])
+
+
+def inner(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """2-4 closed spheres or boxes (radius 2-5% of the diagonal) hidden inside the shape."""
+    diag = diagonal(mesh[0])
+    radii = rng.uniform(0.02, 0.05, size=int(rng.integers(2, 5))) * diag
+    centers, used = inner_centers(mesh, radii, rng)
+    parts = [
+        icosphere(x, r) if rng.random() < 0.5 else box(x, r, rng)
+        for x, r in zip(centers, used, strict=True)
+    ]
+    return concatenate([mesh, *parts])
+
+
+def overlap(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """Two parts cut by a plane, each also keeping a band of 3% of the diagonal past the cut.
+
+    The second part moves by 0.1% of the diagonal in a random direction, so the two bands
+    interpenetrate instead of coinciding.
+    """
+    diag, c = diagonal(mesh[0]), centroids(mesh)
+    _, _, normal, offset = _split(mesh, np.arange(len(mesh[1])), rng)
+    height = c @ normal - offset
+    first = submesh(mesh, height < 0.03 * diag)
+    second = submesh(mesh, height > -0.03 * diag, 0.001 * diag * unit_vector(rng))
+    return concatenate([first, second])
+
+
+KINDS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
+    "fins": fins,
+    "gaps": gaps,
+    "holes": holes,
+    "inner": inner,
+    "overlap": overlap,
+    "soup": soup,
+}
+SUFFIX = {"soup": ".stl"}  # the other kinds are written as OFF
+
+
+# --- files ----------------------------------------------------------------------------------
+
+
+def clean_files(data: Path, every: int) -> list[Path]:
+    """The meshes ``<class>/<file>`` of a folder, by class then file (numbers in order)."""
+
+    def key(path: Path) -> tuple:
+        stem = path.stem
+        return (path.parent.name, not stem.isdigit(), int(stem) if stem.isdigit() else 0, stem)
+
+    files = sorted(
+        (p for p in data.glob("*/*") if p.suffix.lower() in SUFFIXES and p.is_file()), key=key
+    )
+    if not files:
+        raise SystemExit(f"no meshes under {data} (pass --data FOLDER of <class>/<file> meshes)")
+    return files[::every]
+
+
+def messy_path(out: Path, kind: str, clean: Path) -> Path:
+    """Where the copy of one kind of a clean mesh goes."""
+    return out / kind / clean.parent.name / (clean.stem + SUFFIX.get(kind, ".off"))
+
+
+def generator(clean: Path, kind: str) -> np.random.Generator:
+    """A random generator seeded by the file's ``<class>/<name>`` and the kind."""
+    digest = hashlib.sha256(f"{clean.parent.name}/{clean.name}:{kind}".encode()).digest()
+    return np.random.default_rng(int.from_bytes(digest[:8], "little"))
+
+
+def read(path: Path) -> Mesh:
+    """A mesh file as float64 vertices and int64 faces."""
+    vertices, faces = igl.read_triangle_mesh(str(path))
+    return np.asarray(vertices, np.float64), np.asarray(faces, np.int64)
+
+
+def write_off(path: Path, mesh: Mesh) -> None:
+    """Write OFF with every coordinate at full precision (17 significant digits)."""
+    vertices, faces = mesh
+    buffer = io.StringIO()
+    buffer.write(f"OFF\n{len(vertices)} {len(faces)} 0\n")
+    np.savetxt(buffer, vertices, fmt="%.17g")
+    np.savetxt(buffer, np.column_stack([np.full(len(faces), 3), faces]), fmt="%d")
+    path.write_text(buffer.getvalue())
+
+
+def write_stl(path: Path, mesh: Mesh) -> None:
+    """Write binary STL: an 80-byte header, the count, then per face normal, corners, 0."""
+    tri = mesh[0][mesh[1]]
+    record = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
+    rows = np.zeros(len(tri), dtype=record)
+    rows["normal"], rows["corners"] = face_normals(mesh), tri
+    with path.open("wb") as f:
+        f.write(b"cfsig messy benchmark: triangle soup".ljust(80, b" "))
+        f.write(np.uint32(len(tri)).tobytes())
+        f.write(rows.tobytes())
+
+
+def write_copy(out: Path, kind: str, clean: Path) -> tuple[Path, Mesh]:
+    """Make and write one messy copy; return its path and the mesh written."""
+    mesh = KINDS[kind](read(clean), generator(clean, kind))
+    path = messy_path(out, kind, clean)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    (write_stl if path.suffix == ".stl" else write_off)(path, mesh)
+    return path, mesh
+
+
+# --- checks ---------------------------------------------------------------------------------
+
+
+def components(faces: np.ndarray) -> int:
+    """Connected components of faces sharing vertices (unreferenced vertices ignored)."""
+    return len(np.unique(igl.vertex_components(faces)[faces.ravel()]))
+
+
+def check(mesh: Mesh) -> dict[str, int]:
+    """Topology figures: as written, and after merging exactly coincident vertices (as readers do).
+
+    ``boundary`` edges have one face, ``nonmanifold`` edges three or more, ``misoriented``
+    edges two faces that run along them the same way.
+    """
+    vertices, faces = mesh
+    _, inverse = np.unique(vertices, axis=0, return_inverse=True)
+    welded = inverse.reshape(-1)[faces]
+    half = welded[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    half = half[half[:, 0] != half[:, 1]]
+    edges, which, counts = np.unique(
+        np.sort(half, axis=1), axis=0, return_inverse=True, return_counts=True
+    )
+    forward = np.bincount(which.reshape(-1), half[:, 0] < half[:, 1], minlength=len(edges))
+    pairs = counts == 2
+    return {
+        "vertices": len(vertices),
+        "faces": len(faces),
+        "parts": components(faces),
+        "welded parts": components(welded),
+        "boundary": int((counts == 1).sum()),
+        "nonmanifold": int((counts > 2).sum()),
+        "misoriented": int((pairs & (forward != 1)).sum()),
+    }
+
+
+def write_all(out: Path, files: Sequence[Path], kinds: Sequence[str], checked: int) -> list[dict]:
+    """Write every messy copy; print and return the check figures of ``checked`` meshes.
+
+    The checked meshes are spread evenly over the sorted files (so over the classes).
+    """
+    rows, chosen = [], set(np.linspace(0, len(files) - 1, checked).round().astype(int))
+    for i, clean in enumerate(files):
+        if i in chosen:
+            rows.append({"kind": "(clean)", "mesh": _name(clean), **check(read(clean))})
+        for kind in kinds:
+            _, mesh = write_copy(out, kind, clean)
+            if i in chosen:
+                rows.append({"kind": kind, "mesh": _name(clean), **check(mesh)})
+    print(f"{len(files)} meshes x {len(kinds)} kinds -> {out}")
+    if rows:
+        rows.sort(key=lambda r: (r["mesh"], r["kind"] != "(clean)", r["kind"]))
+        print("\nChecks (welded: exactly coincident vertices merged; edges counted after welding):")
+        print("\n" + common.table(list(rows[0]), [list(r.values()) for r in rows]))
+    return rows
+
+
+def _name(path: Path) -> str:
+    """``<class>/<file>`` of a mesh."""
+    return f"{path.parent.name}/{path.name}"
+
+
+# --- measurement ----------------------------------------------------------------------------
+
+
+def signatures(paths: Sequence[Path], params: Params, jobs: int) -> tuple[dict, list[str]]:
+    """Signatures of files by `compute_many`: {path: signature} and the failures' messages."""
+    found, failures = {}, []
+    for outcome in compute_many(paths, params, jobs=jobs):
+        if outcome.error:
+            failures.append(outcome.error)
+        else:
+            found[outcome.path] = outcome.signature
+    return found, sorted(failures)
+
+
+def own_ranks(queries: np.ndarray, index: np.ndarray, own: np.ndarray) -> np.ndarray:
+    """Rank of row ``own[i]`` of ``index`` by L1 to query i (1 = nearest; ties pessimistic)."""
+    d = l1_distances(queries, index)
+    return (d <= d[np.arange(len(own)), own][:, None]).sum(axis=1)
+
+
+def collection(vectors: Sequence[np.ndarray | None], labels: Sequence[str]) -> dict:
+    """Leave-one-out measures of a collection, files without a signature left out.
+
+    The measures are NaN when no class keeps two members (nothing to retrieve).
+    """
+    kept = [i for i, v in enumerate(vectors) if v is not None]
+    names = [labels[i] for i in kept]
+    found = {"meshes": len(kept), "left out": len(vectors) - len(kept)}
+    if len(set(names)) == len(names):
+        return {**found, **dict.fromkeys(MEASURES, float("nan"))}
+    matrix = np.array([vectors[i] for i in kept])
+    return {**found, **evaluate_distances(l1_distances(matrix, matrix), names).measures}
+
+
+def measure(
+    out: Path, files: Sequence[Path], kinds: Sequence[str], args: argparse.Namespace
+) -> dict:
+    """Signatures of the clean and messy files, ranks of the originals, collections' measures."""
+    params = Params(descriptor=args.descriptor, **({"repair": args.repair} if args.repair else {}))
+    clean, clean_failures = signatures(files, params, args.jobs)
+    files = [f for f in files if f in clean]
+    labels = [f.parent.name for f in files]
+    paths = {kind: [messy_path(out, kind, f) for f in files] for kind in kinds}
+    messy, failures = signatures([p for ps in paths.values() for p in ps], params, args.jobs)
+    index = np.array([vector(clean[f]) for f in files])
+    n, copies, collections = len(files), [], {"clean": collection(list(index), labels)}
+    mixed = [paths[kinds[i % len(kinds)]][i] for i in range(n)]
+    collections["messy (kinds round-robin)"] = collection(
+        [vector(messy[p]) if p in messy else None for p in mixed], labels
+    )
+    ranks = {}
+    for kind in kinds:
+        ok = np.array([i for i, p in enumerate(paths[kind]) if p in messy], dtype=np.int64)
+        ranks[kind] = np.full(n, n + 1)  # a failed copy ranks after every mesh
+        if len(ok):
+            queries = np.array([vector(messy[paths[kind][i]]) for i in ok])
+            ranks[kind][ok] = own_ranks(queries, index, ok)
+        seconds = [messy[p].seconds for p in paths[kind] if p in messy]
+        copies.append(
+            {
+                "kind": kind,
+                "copies": n,
+                "failed": n - len(ok),
+                "rank 1 %": 100.0 * float(np.mean(ranks[kind] == 1)),
+                "top 5 %": 100.0 * float(np.mean(ranks[kind] <= 5)),
+                "median rank": float(np.median(ranks[kind])),
+                "median s": common.median(seconds) if seconds else float("nan"),
+            }
+        )
+        vectors = [vector(messy[p]) if p in messy else None for p in paths[kind]]
+        collections[f"all {kind}"] = collection(vectors, labels)
+    return {
+        "command": command(),
+        "params": params.to_json(),
+        "meshes": n,
+        "copies": copies,
+        "rank 1 % overall": 100.0 * float(np.mean(np.concatenate(list(ranks.values())) == 1)),
+        "clean median s": common.median([clean[f].seconds for f in files]),
+        "collections": collections,
+        "ranks": {kind: [int(r) for r in ranks[kind]] for kind in kinds},
+        "files": [_name(f) for f in files],
+        "failures": clean_failures + failures,
+    }
+
+
+def command() -> str:
+    """The command line that is running, as one could type it again from the project folder."""
+    return shlex.join(["python", "benchmarks/messy.py", *sys.argv[1:]])
+
+
+def markdown(results: dict, checks: list[dict]) -> str:
+    """The results as Markdown: the command, the copies' ranks, the collections, the checks."""
+    copies, collections = results["copies"], results["collections"]
+    lines = [
+        "# Retrieval on messy copies of clean meshes",
+        "",
+        f"Measured with `{results['command']}`: {results['meshes']} clean meshes, parameters "
+        f"`{results['params']}`; kinds of mess as in the docstring of benchmarks/messy.py.",
+        "",
+        "Each messy copy queries the index of the clean meshes by L1; the rank is its own "
+        "original's (1 = nearest, ties counted against it, a failed file after every mesh):",
+        "",
+        common.table(list(copies[0]), [list(r.values()) for r in copies]),
+        "",
+        f"Rank 1 over all kinds: {results['rank 1 % overall']:.1f}%. Median seconds per clean "
+        f"file: {results['clean median s']:.3f}.",
+        "",
+        "Leave-one-out retrieval of each collection: the clean one; the messy one, file i "
+        "replaced by its copy of kind i mod K (files sorted); one per kind, every file replaced "
+        "by its copy of that kind. Failed files are left out:",
+        "",
+        common.table(
+            ["collection", "meshes", "left out", *MEASURES],
+            [
+                [name, c["meshes"], c["left out"], *(c[m] for m in MEASURES)]
+                for name, c in collections.items()
+            ],
+        ),
+        "",
+        f"Failures ({len(results['failures'])}):",
+        "",
+        *(f"- {line}" for line in results["failures"] or ["none"]),
+    ]
+    if checks:
+        lines += [
+            "",
+            "Checks of the copies of a few meshes (parts: connected components as written; "
+            "welded: after merging exactly coincident vertices, by which the edges are counted; "
+            "nonmanifold: edges of three or more faces; misoriented: edges of two faces running "
+            "along them the same way):",
+            "",
+            common.table(list(checks[0]), [list(r.values()) for r in checks]),
+        ]
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    """Parse the command line and run a stage."""
+    parser = common.arguments(__doc__.splitlines()[0])
+    parser.add_argument("stage", choices=("write", "measure", "run"))
+    parser.add_argument("--out", type=Path, help="folder of the messy copies (default: temporary)")
+    parser.add_argument("--kinds", nargs="+", choices=sorted(KINDS), default=sorted(KINDS))
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes for signatures")
+    parser.add_argument("--descriptor", choices=DESCRIPTORS, default="cfhks")
+    parser.add_argument("--repair", choices=REPAIR_MODES, help="default: the library's")
+    parser.add_argument("--check", type=int, default=3, help="meshes whose copies are checked")
+    parser.add_argument("--doc", type=Path, help="write the results as Markdown here")
+    args = parser.parse_args()
+    if args.stage == "measure" and args.out is None:
+        parser.error("measure reads the copies that write made: pass --out")
+    if args.out is not None or args.stage == "write":
+        stage(args, args.out or Path(tempfile.mkdtemp(prefix="cfsig-messy-")))
+    else:
+        with tempfile.TemporaryDirectory(prefix="cfsig-messy-") as tmp:
+            stage(args, Path(tmp))
+
+
+def stage(args: argparse.Namespace, out: Path) -> None:
+    """Write the copies into ``out`` and/or measure them; print, and save as asked."""
+    files, kinds = clean_files(args.data, args.every), sorted(set(args.kinds))
+    checks = write_all(out, files, kinds, args.check) if args.stage != "measure" else []
+    if args.stage == "write":
+        return
+    results = measure(out, files, kinds, args)
+    text = markdown(results, checks)
+    print("\n" + text)
+    common.save_rows(args.json, [{**results, "checks": checks}])
+    if args.doc is not None:
+        args.doc.write_text(text)
+
+
+if __name__ == "__main__":
+    main()
