@@ -39,7 +39,7 @@ def dump(args: argparse.Namespace) -> None:
         for solver in solvers:
             mesh, sig = mesh_and_signature(path, Params(), solver)
             out[f"{key}/{solver}/phi"] = sig.phi
-            out[f"{key}/{solver}/histogram"] = sig.histogram
+            out[f"{key}/{solver}/histogram"] = sig.vector
             out[f"{key}/{solver}/curvature_error"] = np.array(sig.curvature_error)
         ops = operators(mesh)
         lap = ops.laplacian

@@ -87,9 +87,11 @@ def channels(cf: ConformalFactor) -> dict[str, np.ndarray]:
     SolverError
         The eigenvalue iteration failed.
     """
-    spectrum = laplace_spectrum(cf.laplacian, cf.vertex_area, cf.labels, cf.solve, EIGENPAIRS)
+    spectrum = laplace_spectrum(
+        cf.operators.laplacian, cf.operators.vertex_area, cf.operators.labels, cf.solve, EIGENPAIRS
+    )
     area = spectrum.area
-    weights = cf.vertex_area / area
+    weights = cf.operators.vertex_area / area
     scaled = np.log(spectrum.eigenvalues * area)
     scaled = np.concatenate([scaled, np.full(EIGENPAIRS - len(scaled), scaled[-1])])
     hks = heat_kernel_signature(spectrum, np.asarray(TIMES) * area)

@@ -15,7 +15,6 @@ import numpy as np
 
 from . import __version__, render
 from .batch import index_meshes
-from .conformal import SOLVERS
 from .errors import CfsigError
 from .evaluate import (
     Collection,
@@ -26,7 +25,7 @@ from .evaluate import (
     read_cla,
 )
 from .index import IndexReader, IndexWriter
-from .params import DESCRIPTORS, Params
+from .params import DESCRIPTORS, SOLVERS, Params
 from .report import write_report
 from .search import search
 from .signature import mesh_and_signature, signature_file
@@ -175,7 +174,7 @@ def compute(
             save.mkdir(parents=True, exist_ok=True)
             np.savez(
                 save / f"{path.stem}.npz",
-                signature=sig.histogram,
+                signature=sig.vector,
                 phi=sig.phi,
                 params=params.to_json(),
             )
@@ -317,7 +316,7 @@ def query(index_file, meshes, k, solver, as_json, png) -> None:
     """
     try:
         with IndexReader(index_file) as reader:
-            sigs = [signature_file(path, reader.params, solver).histogram for path in meshes]
+            sigs = [signature_file(path, reader.params, solver).vector for path in meshes]
             results = search(reader, np.array(sigs), k)
             classes = set(reader.column("labels")) if png else set()
     except CfsigError as exc:
@@ -570,7 +569,7 @@ def _compute_pictures(drawn: list, params: Params, png, ply, hist) -> None:
             render.write_ply(mesh, sig.phi, ply)
         if hist:
             names = [name for name, _, _ in drawn]
-            hists = [sig.histogram for _, _, sig in drawn]
+            hists = [sig.vector for _, _, sig in drawn]
             render.plot_histograms(hists, names, params.edges, hist)
 
 

@@ -38,9 +38,8 @@ from .batch import Progress, compute_many
 from .errors import MeshError
 from .index import IndexReader
 from .mesh import find_meshes
-from .params import Params
+from .params import Params, signature_length
 from .search import l1_distances
-from .signature import signature_length
 
 MEASURES = ("NN", "FT", "ST", "E", "DCG", "mAP")
 RECALL_LEVELS = np.arange(1, 21) / 20.0
@@ -437,7 +436,7 @@ def compute_collection(
             signatures[outcome.path] = outcome.signature
     order = [path for path in found if path in signatures]
     names = tuple(found[path] for path in order)
-    rows = np.array([signatures[path].histogram for path in order])
+    rows = np.array([signatures[path].vector for path in order])
     collection = Collection(
         names,
         tuple(Path(name).parent.name or folder.name for name in names),

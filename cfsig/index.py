@@ -26,7 +26,7 @@ import numpy as np
 
 from . import __version__
 from .errors import IndexFileError
-from .params import Params
+from .params import Params, signature_length
 
 if TYPE_CHECKING:  # importing the signature code would load scipy on the query path
     from .signature import Signature
@@ -261,7 +261,7 @@ class IndexWriter:
         records = list(latest.values())
         picks = [records[i] for i in order]
         columns = {
-            "signatures": np.array([s.histogram for _, s in picks], dtype=np.float32),
+            "signatures": np.array([s.vector for _, s in picks], dtype=np.float32),
             "names": [e.name for e, _ in picks],
             "labels": [e.label for e, _ in picks],
             "paths": [e.path for e, _ in picks],
@@ -285,8 +285,6 @@ def _create_layout(f: h5py.File, params: Params) -> None:
         params=params.to_json(),
         cfsig_version=__version__,
     )
-    from .signature import signature_length  # here: the query path never loads scipy
-
     width = signature_length(params)
     f.create_dataset(
         "signatures", (0, width), np.float32, maxshape=(None, width), chunks=(_CHUNK_ROWS, width)

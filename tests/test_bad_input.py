@@ -93,7 +93,7 @@ def test_polygons_and_mixed_ply_are_triangulated(tmp_path):
     off = "\n".join(["OFF", "8 6 0", *verts, *quads])
     (tmp_path / "cube.off").write_text(off + "\n")
     sig = signature_file(tmp_path / "cube.off", Params())
-    assert np.isfinite(sig.histogram).all() and sig.n_faces == 12
+    assert np.isfinite(sig.vector).all() and sig.n_faces == 12
 
 
 def test_repairs_are_reported(tmp_path):
@@ -121,10 +121,10 @@ def test_zero_area_and_needle_triangles_are_mollified():
         vv = np.vstack([v, d_pos])
         ff = np.vstack([f[1:], [[a, d, c], [d, b, c], [a, b, d]]])
         sig = compute_signature(read_mesh_arrays(vv, ff), Params())
-        assert np.isfinite(sig.histogram).all() and np.isfinite(sig.phi).all(), name
+        assert np.isfinite(sig.vector).all() and np.isfinite(sig.phi).all(), name
         assert any("mollified" in r for r in sig.repairs), name
-        base = compute_signature(read_mesh_arrays(v, f), Params()).histogram
-        assert np.abs(sig.histogram - base).sum() < 0.05, name
+        base = compute_signature(read_mesh_arrays(v, f), Params()).vector
+        assert np.abs(sig.vector - base).sum() < 0.05, name
 
 
 def read_mesh_arrays(v, f):
@@ -136,7 +136,7 @@ def read_mesh_arrays(v, f):
 @pytest.mark.parametrize("make", [disk, open_cylinder], ids=["disk", "cylinder"])
 def test_open_boundaries(make):
     sig = compute_signature(read_mesh_arrays(*make()), Params())
-    assert np.isfinite(sig.histogram).all() and sig.histogram.sum() == pytest.approx(1)
+    assert np.isfinite(sig.vector).all() and sig.vector.sum() == pytest.approx(1)
     assert abs(sig.phi.mean()) < 1e-12
 
 

@@ -62,8 +62,8 @@ def test_a_crashing_worker_costs_only_its_file(meshes):
     assert outcomes["broken.off"].signature is None and "truncated" in outcomes["broken.off"].error
     for path in paths:
         if path.name not in ("crash.off", "broken.off"):
-            expected = signature_file(path, Params()).histogram
-            assert np.array_equal(outcomes[path.name].signature.histogram, expected)
+            expected = signature_file(path, Params()).vector
+            assert np.array_equal(outcomes[path.name].signature.vector, expected)
 
 
 def test_index_meshes_adds_new_and_changed_files_only(meshes, tmp_path):
@@ -92,7 +92,7 @@ def test_index_meshes_adds_new_and_changed_files_only(meshes, tmp_path):
         assert len(reader) == 5
         row = list(reader.column("names")).index("round/a.off")
         stored = reader.signatures[row]
-    expected = signature_file(meshes / "round" / "a.off", Params()).histogram
+    expected = signature_file(meshes / "round" / "a.off", Params()).vector
     assert np.allclose(stored, expected, atol=1e-6)
 
 
@@ -169,7 +169,7 @@ def test_dask_cluster_gives_the_local_results(meshes, dask_cluster):
     assert remote["broken.off"].signature is None and "truncated" in remote["broken.off"].error
     for name, outcome in local.items():
         if outcome.signature is not None:
-            assert np.array_equal(remote[name].signature.histogram, outcome.signature.histogram)
+            assert np.array_equal(remote[name].signature.vector, outcome.signature.vector)
             assert np.array_equal(remote[name].signature.phi, outcome.signature.phi)
 
     runner = CliRunner()

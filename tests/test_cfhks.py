@@ -10,8 +10,8 @@ from cfsig.cli import main
 from cfsig.conformal import conformal_factor
 from cfsig.index import IndexReader
 from cfsig.mesh import clean_mesh
-from cfsig.params import Params
-from cfsig.signature import compute_signature, signature_length
+from cfsig.params import Params, signature_length
+from cfsig.signature import compute_signature
 
 CFHKS = Params(descriptor="cfhks")
 
@@ -24,7 +24,7 @@ def _bumpy(stretch=1.5):
 
 
 def _vector(v, f):
-    return compute_signature(clean_mesh(v, f), CFHKS).histogram
+    return compute_signature(clean_mesh(v, f), CFHKS).vector
 
 
 def test_weighted_quantiles():

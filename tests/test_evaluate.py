@@ -279,7 +279,7 @@ def test_compute_collection_in_file_order_with_folder_labels(folder, computed):
     assert collection.labels == ("shapes", "ring", "ring", "round", "round", "round")
     assert collection.paths == tuple(str(folder / name) for name in names)
     assert collection.signatures.shape == (6, Params().bins)
-    expected = signature_file(folder / "round" / "b.off", Params(), "auto").histogram
+    expected = signature_file(folder / "round" / "b.off", Params(), "auto").vector
     assert np.array_equal(collection.signatures[4], expected)
     assert collection.seconds.shape == (6,) and (collection.seconds > 0).all()
     assert len(failures) == 1 and failures[0].startswith(f"{folder / 'ring' / 'broken.off'}: ")

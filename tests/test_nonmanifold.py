@@ -13,7 +13,7 @@ from cfsig.signature import compute_signature
 
 
 def _sig(v, f):
-    return compute_signature(clean_mesh(v, f), Params()).histogram
+    return compute_signature(clean_mesh(v, f), Params()).vector
 
 
 def _l1(a, b):
@@ -63,7 +63,7 @@ def test_two_parts_touching_at_a_vertex_are_separated():
     assert any("non-manifold" in r for r in mesh.repairs)
     assert len(mesh.vertices) == len(glued_v) + 1
     assert geometry.components(geometry.edge_graph(mesh.faces, len(mesh.vertices)))[0] == 2
-    assert _l1(compute_signature(mesh, Params()).histogram, _sig(*apart)) < 1e-12
+    assert _l1(compute_signature(mesh, Params()).vector, _sig(*apart)) < 1e-12
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +86,7 @@ def test_fin_on_an_edge(body):
     mesh = clean_mesh(fin_v, fin_f)
     _, counts = geometry.edge_face_counts(mesh.faces, len(mesh.vertices))
     assert counts.max() == 2
-    fin_sig = compute_signature(mesh, Params()).histogram
+    fin_sig = compute_signature(mesh, Params()).vector
     assert np.isfinite(fin_sig).all()
     assert _l1(fin_sig, sig) < 0.1 * other
 
@@ -103,7 +103,7 @@ def test_two_bodies_touching_at_a_vertex(body):
     assert any("merged 1 coincident" in r for r in touching.repairs)
     assert any("non-manifold" in r for r in touching.repairs)
     apart_sig = _sig(apart_v, faces)
-    assert _l1(compute_signature(touching, Params()).histogram, apart_sig) < 1e-12
+    assert _l1(compute_signature(touching, Params()).vector, apart_sig) < 1e-12
 
 
 def test_clean_mesh_keeps_the_edges_of_its_check_unless_it_splits():

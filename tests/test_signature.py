@@ -11,7 +11,7 @@ from cfsig.signature import compute_signature, histogram, sample_phi
 
 
 def _sig(v, f, params=None):
-    return compute_signature(clean_mesh(v, f), params or Params()).histogram
+    return compute_signature(clean_mesh(v, f), params or Params()).vector
 
 
 def _l1(a, b):
@@ -91,8 +91,8 @@ def test_noise_keeps_signature_close(body, reference):
 def test_normalized_variant(body):
     params = Params(normalize=True)
     cf = compute_signature(clean_mesh(*body), params)
-    assert cf.histogram.sum() == pytest.approx(1.0)
-    assert cf.histogram[0] > 0 and cf.histogram[-1] > 0  # min and max phi land in the end bins
+    assert cf.vector.sum() == pytest.approx(1.0)
+    assert cf.vector[0] > 0 and cf.vector[-1] > 0  # min and max phi land in the end bins
 
 
 def test_samples_uniform_inside_a_triangle():
