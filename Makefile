@@ -17,6 +17,7 @@ test: $(BIN)/python
 	$(BIN)/pip install -q -e '.[test]'
 	$(BIN)/ruff check cfsig tests benchmarks
 	$(BIN)/ruff format --check cfsig tests benchmarks
+	$(BIN)/mypy
 	$(BIN)/pytest -q
 
 bench: $(BIN)/python

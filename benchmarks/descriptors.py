@@ -35,10 +35,10 @@ sys.path.insert(0, str(ROOT))
 
 from cfsig import cfhks  # noqa: E402
 from cfsig.conformal import conformal_factor  # noqa: E402
-from cfsig.evaluate import evaluate_distances  # noqa: E402
+from cfsig.measures import evaluate_distances  # noqa: E402
 from cfsig.mesh import read_mesh  # noqa: E402
+from cfsig.nearest import l1_distances  # noqa: E402
 from cfsig.params import Params  # noqa: E402
-from cfsig.search import l1_distances  # noqa: E402
 from cfsig.signature import sample_phi, signature_file, signature_of  # noqa: E402
 from cfsig.spectrum import heat_kernel_signature, laplace_spectrum  # noqa: E402
 

@@ -9,26 +9,17 @@ from contextlib import contextmanager
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import click
-import numpy as np
 
-from . import __version__, render
-from .batch import index_meshes
 from .errors import CfsigError
-from .evaluate import (
-    Collection,
-    Evaluation,
-    collection_from_index,
-    compute_collection,
-    evaluate_collections,
-    read_cla,
-)
-from .index import IndexReader, IndexWriter
 from .params import DESCRIPTORS, SOLVERS, Params
-from .report import write_report
-from .search import search
-from .signature import mesh_and_signature, signature_file
+
+if TYPE_CHECKING:  # each command imports what it uses, so that `cfsig --help` starts fast
+    from .evaluate import Collection, Evaluation
+    from .measures import RetrievalReport
+    from .signature import Signature
 
 EXIT_ERROR = 1
 EXIT_SKIPPED = 3
@@ -79,7 +70,7 @@ def _with(options: list[Callable]) -> Callable:
     return decorate
 
 
-def _params(base: Params | None = None, **given: object) -> Params:
+def _params(base: Params | None = None, **given: Any) -> Params:
     """Parameters from the options that were given, on top of ``base`` or the defaults."""
     try:
         return replace(base or Params(), **{k: v for k, v in given.items() if v is not None})
@@ -87,7 +78,7 @@ def _params(base: Params | None = None, **given: object) -> Params:
         raise click.BadParameter(str(exc)) from None
 
 
-def _fail(message: str, code: int = EXIT_ERROR) -> None:
+def _fail(message: str, code: int = EXIT_ERROR) -> NoReturn:
     """Print one error line and exit."""
     click.echo(f"Error: {message}", err=True)
     sys.exit(code)
@@ -104,7 +95,7 @@ def _report_skipped(skipped: list[str], strict: bool) -> None:
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(__version__, prog_name="cfsig")
+@click.version_option(package_name="cfsig", prog_name="cfsig")
 def main() -> None:
     """Pose-invariant 3D shape retrieval with conformal-factor signatures.
 
@@ -156,7 +147,13 @@ def compute(
     params = _params(normalize=normalize, seed=seed, bins=bins, descriptor=descriptor)
     if hist and params.descriptor != "cf":
         raise click.UsageError("--hist plots the histograms of the cf descriptor")
-    rows, failed, drawn = [], [], []
+    import numpy as np
+
+    from .signature import mesh_and_signature
+
+    rows: list[dict] = []
+    failed: list[str] = []
+    drawn: list = []
     for path in meshes:
         try:
             mesh, sig = mesh_and_signature(path, params, solver)
@@ -192,7 +189,7 @@ def compute(
     _report_errors(failed)
 
 
-def _describe(path: Path, sig) -> dict:
+def _describe(path: Path, sig: Signature) -> dict:
     """The facts `compute` reports about one signature."""
     low, high = sig.phi_range
     return {
@@ -260,6 +257,9 @@ def index(
     """
     if jobs is not None and scheduler is not None:
         raise click.UsageError("give --jobs or --scheduler, not both")
+    from .batch import index_meshes
+    from .index import IndexReader, IndexWriter
+
     try:
         base = None
         if output.exists():
@@ -272,9 +272,10 @@ def index(
             added, skipped = index_meshes(
                 writer, paths, solver, jobs, scheduler, strict, commit_every, bar
             )
+        total = len(writer.known)  # after the last commit
     except CfsigError as exc:
         _fail(str(exc))
-    click.echo(f"{output}: {added} meshes added or updated, {len(writer.known)} in the index")
+    click.echo(f"{output}: {added} meshes added or updated, {total} in the index")
     _report_skipped(skipped, strict)
 
 
@@ -314,6 +315,12 @@ def query(index_file, meshes, k, solver, as_json, png) -> None:
       cfsig query shrec07.h5 shrec07/ant/81.off -k 10
       cfsig query shrec07.h5 shrec07/ant/81.off --png ant.png
     """
+    import numpy as np
+
+    from .index import IndexReader
+    from .nearest import search
+    from .signature import signature_file
+
     try:
         with IndexReader(index_file) as reader:
             sigs = [signature_file(path, reader.params, solver).vector for path in meshes]
@@ -416,6 +423,9 @@ def evaluate(
     wanted = _descriptor_list(descriptors)
     if len(wanted) > 1 and (plot or report_dir):
         raise click.UsageError("--plot and --report take one descriptor")
+    from .cla import read_cla
+    from .evaluate import collection_from_index, evaluate_collections
+
     try:
         cla = read_cla(classes) if classes else None
     except OSError as exc:
@@ -423,11 +433,11 @@ def evaluate(
     except ValueError as exc:  # names the file and line already
         _fail(str(exc))
     skipped: list[str] = []
+    collections: dict[str, Collection] = {}
     try:
         if index_file:
             collections = dict([collection_from_index(index_file)])
         else:
-            collections = {}
             for name in wanted:
                 params = _params(normalize=normalize, seed=seed, bins=bins, descriptor=name)
                 collections[name] = _compute_folder(folder, params, solver, jobs, strict, skipped)
@@ -470,6 +480,8 @@ def _compute_folder(
     folder: Path, params: Params, solver: str, jobs, strict: bool, skipped: list[str]
 ) -> Collection:
     """A folder's collection under a progress bar; failures go to ``skipped``, exit if none."""
+    from .evaluate import compute_collection
+
     bar = partial(_progress, what=f"computing {params.descriptor}")
     collection, failures = compute_collection(folder, params, solver, jobs, strict, bar)
     skipped += failures
@@ -496,7 +508,7 @@ def _format_side_by_side(results: dict[str, Evaluation]) -> str:
     return "\n".join(lines)
 
 
-def _format_report(report) -> str:
+def _format_report(report: RetrievalReport) -> str:
     """The measures as text tables."""
     keys = list(report.measures)
     lines = [f"{report.count} queries", f"{'class':<16}" + "".join(f"{k:>8}" for k in keys)]
@@ -561,40 +573,48 @@ def _warn_undrawn(problems: list[str]) -> None:
 
 def _compute_pictures(drawn: list, params: Params, png, ply, hist) -> None:
     """The pictures of `compute`: phi on the meshes, a coloured PLY, the histograms."""
+    from . import figures
+
     with _writing_pictures():
         if png:
-            render.render_phi([(mesh, sig.phi, name) for name, mesh, sig in drawn], png)
+            figures.render_phi([(mesh, sig.phi, name) for name, mesh, sig in drawn], png)
         if ply:
             _, mesh, sig = drawn[0]
-            render.write_ply(mesh, sig.phi, ply)
+            figures.write_ply(mesh, sig.phi, ply)
         if hist:
             names = [name for name, _, _ in drawn]
             hists = [sig.vector for _, _, sig in drawn]
-            render.plot_histograms(hists, names, params.edges, hist)
+            figures.plot_histograms(hists, names, params.edges, hist)
 
 
 def _query_picture(png: Path, meshes, results, classes: set[str]) -> None:
     """The grid of each query (one row per query, wrapped) and its results."""
+    from . import figures
+    from .mesh import mesh_label
+
     rows = []
     for path, hits in zip(meshes, results, strict=True):
-        label = path.parent.name if path.parent.name in classes else None
-        tiles = render.retrieval_row(
+        label = mesh_label(path) if mesh_label(path) in classes else None
+        tiles = figures.retrieval_row(
             (str(path), _short(path), label),
             [(h.entry.path, h.entry.name, h.entry.label, h.distance) for h in hits],
         )
         width = len(tiles) if len(meshes) > 1 else min(len(tiles), _GRID_COLUMNS)
         rows += [tiles[i : i + width] for i in range(0, len(tiles), width)]
     with _writing_pictures():
-        _warn_undrawn(render.render_grid(rows, png))
+        _warn_undrawn(figures.render_grid(rows, png))
 
 
 def _evaluate_pictures(plot, report_dir, result: Evaluation) -> None:
     """The precision/recall plot and the HTML report of `evaluate`."""
+    from . import figures
+    from .report import write_report
+
     report, kept = result.report, result.collection
     columns = (kept.names, kept.labels, kept.paths)
     with _writing_pictures():
         if plot:
-            render.plot_precision_recall(
+            figures.plot_precision_recall(
                 report.class_precision_recall, report.precision_recall, plot
             )
         if report_dir:

@@ -187,7 +187,7 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
         repairs.append(f"removed {int((~used).sum())} unreferenced vertices")
         remap = np.cumsum(used) - 1
         vertices, faces = vertices[used], remap[faces]
-    edges = mesh_edges(faces, len(vertices))
+    edges: Edges | None = mesh_edges(faces, len(vertices))
     split_faces, copies = split_nonmanifold(faces, len(vertices), edges)
     if len(copies):
         repairs.append(f"split {len(np.unique(copies))} non-manifold vertices into separate sheets")
@@ -441,6 +441,7 @@ def _parse_trimesh(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray]:
         raise MissingDependencyError("reading OBJ, PLY and STL needs trimesh") from None
     try:
         loaded = trimesh.load(io.BytesIO(data), file_type=suffix[1:], process=False, force="mesh")
+        assert isinstance(loaded, trimesh.Trimesh)  # force="mesh" makes one
         return np.asarray(loaded.vertices), np.asarray(loaded.faces)
     except Exception as exc:  # trimesh raises many types on malformed files
         raise MeshError(f"malformed {suffix[1:].upper()}: {exc}") from None
@@ -476,3 +477,19 @@ def find_meshes(paths: Iterable[str | os.PathLike]) -> Iterator[tuple[Path, str]
                 if Path(file).suffix.lower() in MESH_SUFFIXES and not file.startswith("."):
                     path = Path(folder) / file
                     yield path, path.relative_to(root).as_posix()
+
+
+def mesh_label(path: str | os.PathLike) -> str:
+    """The class label of a mesh file: the name of the folder that holds it.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A mesh file, e.g. ``shrec07/ant/81.off``.
+
+    Returns
+    -------
+    label : str
+        E.g. ``ant``; empty for a relative path without a folder.
+    """
+    return Path(path).parent.name

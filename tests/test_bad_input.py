@@ -6,22 +6,16 @@ import numpy as np
 import pytest
 import trimesh
 from click.testing import CliRunner
-from conftest import disk, icosphere, open_cylinder
 
 from cfsig.cli import EXIT_SKIPPED, main
 from cfsig.mesh import read_mesh
 from cfsig.params import Params
 from cfsig.signature import compute_signature, signature_file
+from tests.helpers import disk, icosphere, off_text, open_cylinder
 
 
 def _compute(path, *extra):
     return CliRunner().invoke(main, ["compute", *extra, str(path)])
-
-
-def _off(v, f):
-    lines = ["OFF", f"{len(v)} {len(f)} 0", *(" ".join(map(repr, map(float, p))) for p in v)]
-    lines += [f"{len(face)} " + " ".join(map(str, face)) for face in f]
-    return "\n".join(lines) + "\n"
 
 
 BAD_FILES = {
@@ -63,7 +57,7 @@ def test_missing_and_unreadable(tmp_path):
 
 def test_json_output_stays_valid_with_errors(tmp_path):
     good, bad = tmp_path / "good.off", tmp_path / "bad.off"
-    good.write_text(_off(*icosphere(2)))
+    good.write_text(off_text(*icosphere(2)))
     bad.write_text("OFF\n3 1 0\n")
     result = CliRunner().invoke(main, ["compute", "--json", str(good), str(bad)])
     rows = json.loads(result.stdout)
@@ -101,7 +95,7 @@ def test_repairs_are_reported(tmp_path):
     v = np.vstack([v, [[5.0, 5, 5]]])  # unreferenced
     f = np.vstack([f, f[:2], [[0, 0, 1]]])  # two duplicates and a face repeating a vertex
     path = tmp_path / "messy.off"
-    path.write_text(_off(v, f))
+    path.write_text(off_text(v, f))
     result = _compute(path, "--json")
     row = json.loads(result.stdout)[0]
     assert result.exit_code == 0
@@ -143,7 +137,7 @@ def test_open_boundaries(make):
 def test_components_reported(tmp_path):
     v1, f1 = icosphere(1)
     path = tmp_path / "two.off"
-    path.write_text(_off(np.vstack([v1, v1 + 3]), np.vstack([f1, f1 + len(v1)])))
+    path.write_text(off_text(np.vstack([v1, v1 + 3]), np.vstack([f1, f1 + len(v1)])))
     assert "2 component(s)" in _compute(path).output
 
 
@@ -151,7 +145,7 @@ def test_evaluate_keeps_going_past_bad_files(tmp_path):
     for cls in ("a", "b"):
         (tmp_path / cls).mkdir()
         for i in range(2):
-            (tmp_path / cls / f"{i}.off").write_text(_off(*icosphere(1 + i)))
+            (tmp_path / cls / f"{i}.off").write_text(off_text(*icosphere(1 + i)))
     (tmp_path / "b" / "broken.off").write_text("OFF\n")
     result = CliRunner().invoke(main, ["evaluate", str(tmp_path), "-j", "1"])
     assert result.exit_code == EXIT_SKIPPED
@@ -159,10 +153,8 @@ def test_evaluate_keeps_going_past_bad_files(tmp_path):
     assert "Traceback" not in result.output
 
 
-def test_query_mesh_that_fails(tmp_path):
-    from test_index import _build
-
-    _build(tmp_path / "i.h5", 3)
+def test_query_mesh_that_fails(tmp_path, build_index):
+    build_index(tmp_path / "i.h5", 3)
     (tmp_path / "q.off").write_text("nonsense")
     result = CliRunner().invoke(main, ["query", str(tmp_path / "i.h5"), str(tmp_path / "q.off")])
     assert result.exit_code == 1

@@ -1,6 +1,5 @@
 import numpy as np
 import pytest
-from conftest import icosphere, random_rotation, torus
 
 from cfsig import geometry
 from cfsig.conformal import (
@@ -11,6 +10,7 @@ from cfsig.conformal import (
 )
 from cfsig.errors import SolverError
 from cfsig.mesh import clean_mesh
+from tests.helpers import icosphere, random_rotation, torus
 
 
 def _bumpy(seed=0):

@@ -4,21 +4,10 @@ import pytest
 
 from cfsig.errors import IndexFileError
 from cfsig.index import Entry, IndexReader, IndexWriter
+from cfsig.nearest import l1_distances, nearest, search
 from cfsig.params import Params
-from cfsig.search import l1_distances, nearest, search
-from cfsig.signature import Signature
-
-
-def _sig(seed, bins=200):
-    h = np.random.default_rng(seed).random(bins)
-    return Signature(h / h.sum(), np.zeros(3), 3, 1, 1, 0.0, (), 0.0, f"{seed:064d}")
-
-
-def _build(path, n=10, params=None):
-    with IndexWriter(path, params or Params()) as w:
-        for i in range(n):
-            w.add(Entry(f"c{i % 3}/{i}.off", f"c{i % 3}", f"/data/c{i % 3}/{i}.off"), _sig(i))
-    return [_sig(i).vector for i in range(n)]
+from tests.helpers import build_index as _build
+from tests.helpers import random_signature as _sig
 
 
 def test_round_trip(tmp_path):

@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-from conftest import disk, icosphere, open_cylinder, torus
 
 from cfsig import geometry
 from cfsig.conformal import conformal_factor
@@ -10,6 +9,7 @@ from cfsig.demo import capsule, limbed_body
 from cfsig.mesh import clean_mesh, split_nonmanifold
 from cfsig.params import Params
 from cfsig.signature import compute_signature
+from tests.helpers import disk, icosphere, open_cylinder, torus
 
 
 def _sig(v, f):
@@ -68,14 +68,20 @@ def test_two_parts_touching_at_a_vertex_are_separated():
 
 @pytest.fixture(scope="module")
 def body():
-    v, f = limbed_body(3, 0)
-    sig = _sig(v, f)
-    other = min(_l1(sig, _sig(*limbed_body(2, 0))), _l1(sig, _sig(*capsule())))
-    return v, f, sig, other
+    """A body with three limbs."""
+    return limbed_body(3, 0)
 
 
-def test_fin_on_an_edge(body):
-    v, f, sig, other = body
+@pytest.fixture(scope="module")
+def body_signature(body):
+    """The body's signature and its L1 distance to the nearer of two other shapes."""
+    sig = _sig(*body)
+    return sig, min(_l1(sig, _sig(*limbed_body(2, 0))), _l1(sig, _sig(*capsule())))
+
+
+def test_fin_on_an_edge(body, body_signature):
+    v, f = body
+    sig, other = body_signature
     a, b, c = f[100]
     normal = np.cross(v[b] - v[a], v[c] - v[a])
     tip = (v[a] + v[b]) / 2 + normal / np.linalg.norm(normal) * np.linalg.norm(v[b] - v[a])
@@ -92,7 +98,7 @@ def test_fin_on_an_edge(body):
 
 
 def test_two_bodies_touching_at_a_vertex(body):
-    v, f, sig, other = body
+    v, f = body
     cv, cf = capsule()
     right, left = np.argmax(v[:, 0]), np.argmin(cv[:, 0])
     touching_v = np.vstack([v, cv + (v[right] - cv[left])])

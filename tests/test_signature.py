@@ -1,13 +1,13 @@
 import igl
 import numpy as np
 import pytest
-from conftest import random_rotation
 
 from cfsig import geometry
 from cfsig.demo import limbed_body
 from cfsig.mesh import clean_mesh
 from cfsig.params import Params
 from cfsig.signature import compute_signature, histogram, sample_phi
+from tests.helpers import random_rotation
 
 
 def _sig(v, f, params=None):

@@ -1,11 +1,11 @@
 import numpy as np
 import pytest
 import scipy.linalg
-from conftest import icosphere, random_rotation, torus
 
 from cfsig.conformal import conformal_factor
 from cfsig.mesh import clean_mesh
 from cfsig.spectrum import heat_kernel_signature, laplace_spectrum
+from tests.helpers import icosphere, random_rotation, torus
 
 
 def _spectrum(v, f, count):
