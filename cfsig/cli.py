@@ -25,6 +25,9 @@ EXIT_ERROR = 1
 EXIT_SKIPPED = 3
 RETRIEVAL_DESCRIPTOR = "cfhks"  # the default of index and evaluate: docs/descriptors.md
 _GRID_COLUMNS = 7  # tiles per row of a single query's --png grid
+_FILE = click.Path(dir_okay=False, path_type=Path)
+_FOLDER = click.Path(file_okay=False, path_type=Path)
+_PATH = click.Path(path_type=Path)  # a file or a folder
 
 _params_options = [
     click.option(
@@ -57,6 +60,12 @@ _jobs_option = click.option(
     help="Worker processes [all cores].",
 )
 _json_option = click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+
+
+def _count_option(*names: str, default: int, help: str) -> Callable:
+    """An option taking a positive integer, its default shown in the help."""
+    count = click.IntRange(min=1)
+    return click.option(*names, type=count, default=default, show_default=True, help=help)
 
 
 def _with(options: list[Callable]) -> Callable:
@@ -106,29 +115,29 @@ def main() -> None:
 
 
 @main.command()
-@click.argument("meshes", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.argument("meshes", nargs=-1, required=True, type=_PATH)
 @_with(_params_options)
 @_descriptor_option
 @_solver_option
 @_json_option
 @click.option(
     "--save",
-    type=click.Path(file_okay=False, path_type=Path),
+    type=_FOLDER,
     help="Write DIR/<name>.npz with the signature and per-vertex phi.",
 )
 @click.option(
     "--png",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="Draw the meshes side by side coloured by phi scaled to [0, 1].",
 )
 @click.option(
     "--ply",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="Write the mesh with per-vertex colours of phi (one mesh only).",
 )
 @click.option(
     "--hist",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="Plot the signature histograms overlaid.",
 )
 def compute(
@@ -214,12 +223,12 @@ def _report_errors(errors: list[str]) -> None:
 
 
 @main.command()
-@click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.argument("paths", nargs=-1, required=True, type=_PATH)
 @click.option(
     "-o",
     "--output",
     required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="The index file (HDF5); created, or updated with new and changed meshes.",
 )
 @_with(_params_options)
@@ -232,11 +241,9 @@ def _report_errors(errors: list[str]) -> None:
     "processes; the mesh paths must be readable on the workers. Needs the dask extra.",
 )  # fmt: skip
 @click.option("--strict", is_flag=True, help="Stop at the first file that fails.")
-@click.option(
+@_count_option(
     "--commit-every",
-    type=click.IntRange(min=1),
     default=200,
-    show_default=True,
     help="Commit to the index file after this many meshes (and every 30 s).",
 )
 def index(
@@ -287,20 +294,14 @@ def _progress(iterable, total: int, what: str):
 
 
 @main.command()
-@click.argument("index_file", type=click.Path(dir_okay=False, path_type=Path))
-@click.argument("meshes", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option(
-    "-k",
-    type=click.IntRange(min=1),
-    default=20,
-    show_default=True,
-    help="Number of results per query.",
-)
+@click.argument("index_file", type=_FILE)
+@click.argument("meshes", nargs=-1, required=True, type=_PATH)
+@_count_option("-k", default=20, help="Number of results per query.")
 @_solver_option
 @_json_option
 @click.option(
     "--png",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="Draw each query and its results as framed thumbnails.",
 )
 def query(index_file, meshes, k, solver, as_json, png) -> None:
@@ -352,16 +353,16 @@ def query(index_file, meshes, k, solver, as_json, png) -> None:
 
 
 @main.command()
-@click.argument("folder", required=False, type=click.Path(file_okay=False, path_type=Path))
+@click.argument("folder", required=False, type=_FOLDER)
 @click.option(
     "--classes",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="Classes from a Princeton Shape Benchmark .cla file instead of subfolders.",
 )
 @click.option(
     "--index",
     "index_file",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="Evaluate the signatures of an index instead of computing them.",
 )
 @click.option(
@@ -377,13 +378,13 @@ def query(index_file, meshes, k, solver, as_json, png) -> None:
 @_json_option
 @click.option(
     "--plot",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="Plot the precision/recall curves, overall and per class.",
 )
 @click.option(
     "--report",
     "report_dir",
-    type=click.Path(file_okay=False, path_type=Path),
+    type=_FOLDER,
     help="Write DIR/index.html: measures, curves and one query per class.",
 )
 def evaluate(
@@ -521,7 +522,7 @@ def _format_report(report: RetrievalReport) -> str:
 @main.command()
 @click.option(
     "--out",
-    type=click.Path(file_okay=False, path_type=Path),
+    type=_FOLDER,
     default="cfsig-demo",
     show_default=True,
     help="Folder for the generated meshes and the index.",

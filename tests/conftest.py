@@ -17,6 +17,14 @@ def sphere():
     return helpers.icosphere(3)
 
 
+@pytest.fixture(scope="session")
+def body():
+    """A body with three limbs, in its rest pose (`cfsig.demo.limbed_body`)."""
+    from cfsig.demo import limbed_body
+
+    return limbed_body(3, 0)
+
+
 @pytest.fixture
 def shrec07():
     """The SHREC 2007 folder, or a skip when it is not unpacked beside the project."""

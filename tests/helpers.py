@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from cfsig.index import Entry, IndexWriter
+from cfsig.mesh import clean_mesh
 from cfsig.params import Params
-from cfsig.signature import Signature
+from cfsig.signature import Signature, compute_signature
 
 
 def icosphere(levels: int = 3) -> tuple[np.ndarray, np.ndarray]:
@@ -91,6 +92,16 @@ def random_rotation(seed: int) -> np.ndarray:
     q, r = np.linalg.qr(np.random.default_rng(seed).standard_normal((3, 3)))
     q *= np.sign(np.diag(r))
     return q * np.linalg.det(q)
+
+
+def signature_vector(vertices: np.ndarray, faces: np.ndarray, params: Params | None = None):
+    """The signature vector of a mesh given as arrays, cleaned by `clean_mesh`."""
+    return compute_signature(clean_mesh(vertices, faces), params or Params()).vector
+
+
+def l1(a: np.ndarray, b: np.ndarray) -> float:
+    """The L1 distance between two signature vectors."""
+    return float(np.abs(a - b).sum())
 
 
 def off_text(vertices: np.ndarray, faces) -> str:

@@ -10,14 +10,8 @@ from cfsig.mesh import clean_mesh, split_nonmanifold
 from cfsig.params import Params
 from cfsig.signature import compute_signature
 from tests.helpers import disk, icosphere, open_cylinder, torus
-
-
-def _sig(v, f):
-    return compute_signature(clean_mesh(v, f), Params()).vector
-
-
-def _l1(a, b):
-    return float(np.abs(a - b).sum())
+from tests.helpers import l1 as _l1
+from tests.helpers import signature_vector as _sig
 
 
 def test_manifold_mesh_is_untouched():
@@ -64,12 +58,6 @@ def test_two_parts_touching_at_a_vertex_are_separated():
     assert len(mesh.vertices) == len(glued_v) + 1
     assert geometry.components(geometry.edge_graph(mesh.faces, len(mesh.vertices)))[0] == 2
     assert _l1(compute_signature(mesh, Params()).vector, _sig(*apart)) < 1e-12
-
-
-@pytest.fixture(scope="module")
-def body():
-    """A body with three limbs."""
-    return limbed_body(3, 0)
 
 
 @pytest.fixture(scope="module")

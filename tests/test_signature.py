@@ -7,20 +7,9 @@ from cfsig.demo import limbed_body
 from cfsig.mesh import clean_mesh
 from cfsig.params import Params
 from cfsig.signature import compute_signature, histogram, sample_phi
+from tests.helpers import l1 as _l1
 from tests.helpers import random_rotation
-
-
-def _sig(v, f, params=None):
-    return compute_signature(clean_mesh(v, f), params or Params()).vector
-
-
-def _l1(a, b):
-    return float(np.abs(a - b).sum())
-
-
-@pytest.fixture(scope="module")
-def body():
-    return limbed_body(3, 0)
+from tests.helpers import signature_vector as _sig
 
 
 @pytest.fixture(scope="module")
