@@ -1,7 +1,8 @@
 """Start-up time: ``cfsig --help`` and one small ``cfsig compute`` against ``import numpy``.
 
-Each command runs ``--repeat`` times in a fresh interpreter (after one unmeasured warm-up run
-that fills the page cache); the table gives the median wall time and its ratio to
+Each command runs ``--repeat`` times in a fresh interpreter, the commands taking turns so that
+a change in the machine's load falls on all of them alike, after one unmeasured warm-up run of
+each that fills the page cache; the table gives the median wall time and its ratio to
 ``python -c "import numpy"``. The target of issue 13: ``cfsig --help`` within 1.5 times it.
 
     python benchmarks/startup.py --repeat 5
@@ -22,15 +23,16 @@ import common
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def wall(command: list[str], repeat: int) -> float:
-    """The median wall seconds of ``command`` over ``repeat`` runs, after one warm-up."""
-    subprocess.run(command, check=True, capture_output=True)
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        subprocess.run(command, check=True, capture_output=True)
-        times.append(time.perf_counter() - start)
-    return common.median(times)
+def walls(commands: dict[str, list[str]], repeat: int) -> dict[str, float]:
+    """The median wall seconds of each command over ``repeat`` runs taken in turns."""
+    times: dict[str, list[float]] = {name: [] for name in commands}
+    for run in range(repeat + 1):
+        for name, command in commands.items():
+            start = time.perf_counter()
+            subprocess.run(command, check=True, capture_output=True)
+            if run:  # run 0 is the warm-up
+                times[name].append(time.perf_counter() - start)
+    return {name: common.median(values) for name, values in times.items()}
 
 
 def main() -> None:
@@ -49,7 +51,7 @@ def main() -> None:
             "cfsig --help": [cfsig, "--help"],
             "cfsig compute ball.off (162 vertices)": [cfsig, "compute", str(mesh)],
         }
-        seconds = {name: wall(command, args.repeat) for name, command in commands.items()}
+        seconds = walls(commands, args.repeat)
     base = seconds['python -c "import numpy"']
     rows = [[name, f"{s:.3f}", f"{s / base:.2f}"] for name, s in seconds.items()]
     print(common.table(["command", "median wall s", "x import numpy"], rows))
