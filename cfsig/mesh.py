@@ -330,7 +330,7 @@ def _parse_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     if plain is not None:
         return plain
     tokens = data.split()
-    if not tokens[0].upper().endswith(b"OFF"):
+    if not tokens or not tokens[0].upper().endswith(b"OFF"):
         raise MeshError("not an OFF file (no OFF header)")
     try:
         n_v, n_f = int(tokens[1]), int(tokens[2])

@@ -21,6 +21,7 @@ def _compute(path, *extra):
 BAD_FILES = {
     "empty.off": (b"", "empty file"),
     "garbage.off": (bytes(range(256)) * 4, "not an OFF file"),
+    "comment.off": (b"# only a comment\n", "not an OFF file"),  # found by tests/test_fuzz.py
     "truncated.off": (b"OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n", "truncated OFF"),
     "huge.off": (b"OFF\n1000000000 2000000000 0\n0 0 0\n", "truncated OFF"),
     "words.off": (b"OFF\n3 1 0\n0 0 zero\n1 0 0\n0 1 0\n3 0 1 2\n", "malformed OFF"),
