@@ -34,4 +34,4 @@ bench-perf: $(BIN)/python
 	$(BIN)/python benchmarks/index_jobs.py
 
 clean:
-	rm -rf $(VENV) cfsig-demo .pytest_cache .ruff_cache
+	rm -rf $(VENV) cfsig-demo .pytest_cache .ruff_cache .mypy_cache .hypothesis

@@ -2,9 +2,9 @@
 
 The names below are the library's public API, so that ``import cfsig`` is enough::
 
-    sig = cfsig.signature_file("ant/81.off", cfsig.Params())
     with cfsig.IndexReader("shrec07.h5") as index:
-        hits = cfsig.search(index, cfsig.signature_file(path, index.params).vector[None])
+        query = cfsig.signature_file("ant/81.off", index.params).vector
+        hits = cfsig.search(index, query[None], k=20)[0]
 
 Each is imported from its module on first use (PEP 562), so that importing the package loads
 neither SciPy nor matplotlib.
