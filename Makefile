@@ -17,6 +17,7 @@ test: $(BIN)/python
 	$(BIN)/pip install -q -e '.[test]'
 	$(BIN)/ruff check cfsig tests benchmarks
 	$(BIN)/ruff format --check cfsig tests benchmarks
+	$(BIN)/mypy
 	$(BIN)/pytest -q
 
 bench: $(BIN)/python
@@ -33,4 +34,4 @@ bench-perf: $(BIN)/python
 	$(BIN)/python benchmarks/index_jobs.py
 
 clean:
-	rm -rf $(VENV) cfsig-demo .pytest_cache .ruff_cache
+	rm -rf $(VENV) cfsig-demo .pytest_cache .ruff_cache .mypy_cache .hypothesis

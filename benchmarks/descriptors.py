@@ -35,10 +35,10 @@ sys.path.insert(0, str(ROOT))
 
 from cfsig import cfhks  # noqa: E402
 from cfsig.conformal import conformal_factor  # noqa: E402
-from cfsig.evaluate import evaluate_distances  # noqa: E402
+from cfsig.measures import evaluate_distances  # noqa: E402
 from cfsig.mesh import read_mesh  # noqa: E402
+from cfsig.nearest import l1_distances  # noqa: E402
 from cfsig.params import Params  # noqa: E402
-from cfsig.search import l1_distances  # noqa: E402
 from cfsig.signature import sample_phi, signature_file, signature_of  # noqa: E402
 from cfsig.spectrum import heat_kernel_signature, laplace_spectrum  # noqa: E402
 
@@ -61,14 +61,16 @@ def _channels_of(path: Path) -> dict[str, np.ndarray]:
     mesh = read_mesh(path)
     cf = conformal_factor(mesh, Params().mollify)
     out = {"cf": signature_of(cf, mesh.faces, Params())}
-    samples = sample_phi(mesh.faces, cf.face_areas, cf.phi, 5 * len(mesh.faces), 0)
+    samples = sample_phi(mesh.faces, cf.operators.face_areas, cf.phi, 5 * len(mesh.faces), 0)
     out["phi_sampled"] = np.quantile(np.concatenate([samples, cf.phi]), (np.arange(Q) + 0.5) / Q)
-    area = cf.vertex_area.sum()
-    weights = cf.vertex_area / area
+    area = cf.operators.vertex_area.sum()
+    weights = cf.operators.vertex_area / area
     out["phi"] = cfhks.weighted_quantiles(cf.phi, weights, Q)
     lo, hi = cf.phi.min(), cf.phi.max()
     out["phi_unit"] = cfhks.weighted_quantiles((cf.phi - lo) / (hi - lo), weights, Q)
-    full = laplace_spectrum(cf.laplacian, cf.vertex_area, cf.labels, cf.solve, MAX_PAIRS)
+    full = laplace_spectrum(
+        cf.operators.laplacian, cf.operators.vertex_area, cf.operators.labels, cf.solve, MAX_PAIRS
+    )
     out["spectrum"] = np.log(full.eigenvalues * area)
     for k in PAIRS:
         part = type(full)(
@@ -245,7 +247,9 @@ def cost(args: argparse.Namespace) -> None:
         times["cf"].append(time.process_time() - start)
         for k in PAIRS:
             start = time.process_time()
-            laplace_spectrum(cf.laplacian, cf.vertex_area, cf.labels, cf.solve, k)
+            laplace_spectrum(
+                cf.operators.laplacian, cf.operators.vertex_area, cf.operators.labels, cf.solve, k
+            )
             times[k].append(time.process_time() - start)
     base = np.array(times["cf"])
     print(f"{len(base)} meshes; CF (reading, solve, histogram): median {np.median(base):.4f} s")
@@ -290,7 +294,7 @@ def compare(args: argparse.Namespace) -> None:
     for i, path in enumerate(paths):
         for n in names if i % 2 == 0 else names[::-1]:
             start = time.process_time()
-            vectors[n].append(signature_file(path, params[n], args.solver).histogram)
+            vectors[n].append(signature_file(path, params[n], args.solver).vector)
             seconds[n].append(time.process_time() - start)
     labels = [p.parent.name for p in paths]
     reports = {}

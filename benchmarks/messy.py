@@ -46,8 +46,8 @@ import numpy as np
 
 from cfsig.batch import compute_many
 from cfsig.evaluate import evaluate_distances
+from cfsig.nearest import l1_distances
 from cfsig.params import DESCRIPTORS, REPAIR_MODES, Params
-from cfsig.search import l1_distances
 
 Mesh = tuple[np.ndarray, np.ndarray]  # vertices (n, 3) float64, faces (m, 3) int64
 SUFFIXES = (".off", ".obj", ".ply", ".stl")
@@ -57,7 +57,7 @@ MEASURES = ("NN", "FT", "ST", "mAP")
 
 def vector(signature) -> np.ndarray:
     """The signature's vector (the one place that names the attribute)."""
-    return signature.histogram
+    return signature.vector
 
 
 # --- small geometry -----------------------------------------------------------------------

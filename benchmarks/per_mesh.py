@@ -72,7 +72,7 @@ def measure(path: Path, params: Params, solver: str) -> dict:
                          ops.mollified, error, ops.laplacian, ops.vertex_area, ops.labels,
                          factorized)  # fmt: skip
     hist, *stages["sampling+histogram"] = common.timed(lambda: signature_of(cf, mesh.faces, params))
-    assert np.array_equal(hist, sig.histogram), f"{path}: stages disagree with signature_file"
+    assert np.array_equal(hist, sig.vector), f"{path}: stages disagree with signature_file"
     for stage, (cpu, wall) in stages.items():
         row[f"{stage}_cpu"], row[f"{stage}_wall"] = cpu, wall
     # Two parts of those stages, timed again on their own: checking and repairing the mesh

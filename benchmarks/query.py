@@ -81,7 +81,7 @@ def baseline_nearest(reader: IndexReader, queries: np.ndarray, k: int):
 def measure(index: str, impl: str, n_queries: int, reps: int) -> dict:
     """In this process: one untimed run, then ``reps`` timed runs of open + query + names."""
     import cfsig.l1
-    from cfsig.search import nearest
+    from cfsig.nearest import nearest
 
     if impl == "numpy":
         cfsig.l1.FAST_MIN_WORK = 1 << 62
@@ -143,7 +143,7 @@ def fresh_process(index: Path) -> float:
     code = (
         "import numpy as np\n"
         "from cfsig.index import IndexReader\n"
-        "from cfsig.search import search\n"
+        "from cfsig.nearest import search\n"
         f"with IndexReader({str(index)!r}) as r:\n"
         "    search(r, np.full((1, 200), 1 / 200), 20)\n"
     )

@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT))
 
 import cfsig.blocks  # noqa: E402
 import cfsig.l1  # noqa: E402
-import cfsig.search  # noqa: E402
+import cfsig.nearest  # noqa: E402
 from benchmarks.query import baseline_nearest, peak_mb, versions  # noqa: E402
 
 DOC = ROOT / "docs" / "query-options.md"
@@ -132,7 +132,7 @@ def l1_numba() -> cfsig.l1.Kernel:
 def configure(option: str) -> None:
     """Set cfsig's search up for one option (kernel, threads, reading, piece size)."""
     threads = 1 if "1 thread" in option else 2
-    cfsig.search._threads = lambda: threads
+    cfsig.nearest._threads = lambda: threads
     kernel = cfsig.l1.l1_numpy
     if "numba" in option:
         kernel = l1_numba()
@@ -142,11 +142,11 @@ def configure(option: str) -> None:
         kernel = l1_numpy_broadcast
     elif "cdist" in option:
         kernel = l1_cdist
-    cfsig.search.choose_kernel = lambda work: kernel
+    cfsig.nearest.choose_kernel = lambda work: kernel
     if "read_direct" in option:
         cfsig.blocks._plain = lambda dataset: False
     if "mapped blocks" in option:
-        cfsig.search.read_block = read_block_mapped
+        cfsig.nearest.read_block = read_block_mapped
     for piece in (64, 1024):
         if f"pieces of {piece}" in option:
             cfsig.l1._PIECE_ROWS = piece
@@ -168,7 +168,7 @@ def measure(path: str, option: str, n_queries: int) -> dict:
         elif option.startswith("baseline"):
             baseline_nearest(reader, queries, 20)
         else:
-            cfsig.search.nearest(reader, queries, 20)
+            cfsig.nearest.nearest(reader, queries, 20)
         wall.append(time.perf_counter() - t)
         cpu.append(time.process_time() - c)
     return {

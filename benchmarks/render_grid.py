@@ -4,7 +4,7 @@ Usage: python benchmarks/render_grid.py [SHREC07_FOLDER] [--repeat 5]
 
 Takes the 20 SHREC 2007 meshes whose vertex counts are nearest 10,000 and times, in one run:
 reading them; shading their thumbnails, with and without back-face culling;
-`render.render_grid` (reading, the numpy z-buffer rasteriser, matplotlib layout and the PNG
+`figures.render_grid` (reading, the numpy z-buffer rasteriser, matplotlib layout and the PNG
 file); the same grid drawn the other way the task suggested, matplotlib `PolyCollection`s with
 faces sorted back to front (painter's algorithm); and the whole grid in a fresh Python process
 (imports included), as a command pays it. Prints a Markdown table of medians for
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cfsig import render
+from cfsig import figures, raster
 from cfsig.mesh import read_mesh
 
 SHREC = Path(__file__).resolve().parents[2] / "shared" / "data" / "shrec07"
@@ -42,9 +42,9 @@ def nearest_10k(folder: Path, count: int = 20) -> list[tuple[Path, int]]:
 
 def zbuffer_grid(paths: list[Path], out: Path) -> None:
     """The grid as cfsig draws it."""
-    thumbs = [render.Thumb(str(p), f"{p.parent.name}/{p.name}") for p in paths]
+    thumbs = [figures.Thumb(str(p), f"{p.parent.name}/{p.name}") for p in paths]
     rows = [thumbs[i : i + COLUMNS] for i in range(0, len(thumbs), COLUMNS)]
-    render.render_grid(rows, out, tile=TILE)
+    figures.render_grid(rows, out, tile=TILE)
 
 
 def painter_grid(paths: list[Path], out: Path) -> None:
@@ -61,12 +61,12 @@ def painter_grid(paths: list[Path], out: Path) -> None:
         row, column = divmod(i, COLUMNS)
         ax = fig.add_axes((column / COLUMNS, 1 - (row + 1) / rows, 1 / COLUMNS, 1 / rows))
         ax.set_axis_off()
-        view = render.default_view(mesh.vertices)
-        corners = render.screen_coordinates(mesh.vertices, view, (TILE, TILE))[mesh.faces]
+        view = raster.default_view(mesh.vertices)
+        corners = raster.screen_coordinates(mesh.vertices, view, (TILE, TILE))[mesh.faces]
         normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
         normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
         normals[:, 1] *= -1  # screen rows grow downwards
-        light = 0.3 + 0.7 * np.abs(normals @ render.LIGHT)
+        light = 0.3 + 0.7 * np.abs(normals @ raster.LIGHT)
         order = np.argsort(corners[:, :, 2].mean(axis=1), kind="stable")
         colors = np.column_stack([np.outer(light, [0.78, 0.76, 0.72]), np.ones(len(light))])
         ax.add_collection(
@@ -84,13 +84,13 @@ def painter_grid(paths: list[Path], out: Path) -> None:
 
 def without_culling(meshes: list) -> None:
     """Shade the thumbnails with every face rasterised, as for an open mesh."""
-    visible = render._visible_faces
-    render._visible_faces = lambda mesh, toward: mesh.faces
+    visible = raster._visible_faces
+    raster._visible_faces = lambda mesh, toward: mesh.faces
     try:
         for mesh in meshes:
-            render.shade_mesh(mesh, size=(TILE, TILE))
+            raster.shade_mesh(mesh, size=(TILE, TILE))
     finally:
-        render._visible_faces = visible
+        raster._visible_faces = visible
 
 
 def fresh_process(paths: list[Path], out: Path) -> float:
@@ -134,7 +134,7 @@ def main() -> None:
         results = {
             "read the 20 meshes": timed(lambda: [read_mesh(p) for p in paths], args.repeat),
             "shade the 20 thumbnails (`shade_mesh`)": timed(
-                lambda: [render.shade_mesh(m, size=(TILE, TILE)) for m in meshes], args.repeat
+                lambda: [raster.shade_mesh(m, size=(TILE, TILE)) for m in meshes], args.repeat
             ),
             "the same without back-face culling": timed(
                 lambda: without_culling(meshes), args.repeat

@@ -1,10 +1,10 @@
 """Check that two versions of cfsig give the same results bit for bit on a data set.
 
-``dump`` writes, for every mesh and solver family, phi, the histogram and the curvature error,
-and per mesh the checked vertices and faces, the Laplacian (its CSC arrays) and the curvature,
-to an ``.npz`` file; run it once per version (each with its own ``PYTHONPATH``). ``compare``
-prints, per quantity, whether the two dumps are identical, and phi's largest difference relative
-to its range.
+``dump`` writes, for every mesh and solver family, phi, the signature vector and the curvature
+error, and per mesh the checked vertices and faces, the Laplacian (its CSC arrays) and the
+curvature, to an ``.npz`` file; run it once per version (each with its own ``PYTHONPATH``).
+``compare`` prints, per quantity, whether the two dumps are identical, and phi's largest
+difference relative to its range.
 
     python benchmarks/same_results.py dump OUT.npz [--every K] [--solvers cholmod scipy]
     python benchmarks/same_results.py compare A.npz B.npz
@@ -39,7 +39,9 @@ def dump(args: argparse.Namespace) -> None:
         for solver in solvers:
             mesh, sig = mesh_and_signature(path, Params(), solver)
             out[f"{key}/{solver}/phi"] = sig.phi
-            out[f"{key}/{solver}/histogram"] = sig.histogram
+            # this script compares versions: before issue 13 the vector was named `histogram`
+            vector = sig.vector if hasattr(sig, "vector") else sig.histogram
+            out[f"{key}/{solver}/vector"] = vector
             out[f"{key}/{solver}/curvature_error"] = np.array(sig.curvature_error)
         ops = operators(mesh)
         lap = ops.laplacian

@@ -15,11 +15,10 @@ from pathlib import Path
 
 from .errors import CfsigError, ClusterError, MissingDependencyError
 from .index import Entry, IndexWriter
-from .mesh import find_meshes
+from .mesh import find_meshes, mesh_label
 from .params import Params
 from .signature import Signature, signature_file
 
-_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 _CONNECT_TIMEOUT = "20s"
 _COMMIT_SECONDS = 30.0
 Compute = Callable[[Path, Params, str], Signature]
@@ -175,7 +174,8 @@ def index_meshes(
         A commit failed.
     """
     todo: dict[Path, str] = {}  # the files to compute, and their names
-    taken, failures = set(), []
+    taken: set[str] = set()
+    failures: list[str] = []
     for path, name in find_meshes(paths):
         if name in taken:
             failures.append(f"{path}: its name {name!r} is already taken by another file")
@@ -185,19 +185,52 @@ def index_meshes(
             todo[path] = name
     added, last_commit = 0, time.monotonic()
     outcomes = compute_many(todo, writer.params, solver, jobs, scheduler)
-    for outcome in progress(outcomes, len(todo)) if progress else outcomes:
-        if outcome.error:
-            failures.append(outcome.error)
-            if strict:
-                break
-            continue
-        path = outcome.path
-        writer.add(Entry(todo[path], path.parent.name, str(path.resolve())), outcome.signature)
+    for path, signature in successes(outcomes, len(todo), failures, strict, progress):
+        writer.add(Entry(todo[path], mesh_label(path), str(path.resolve())), signature)
         added += 1
         if writer.pending >= commit_every or time.monotonic() - last_commit > _COMMIT_SECONDS:
             writer.commit()
             last_commit = time.monotonic()
     return added, failures
+
+
+def successes(
+    outcomes: Iterator[Outcome],
+    total: int,
+    failures: list[str],
+    strict: bool = False,
+    progress: Progress | None = None,
+) -> Iterator[tuple[Path, Signature]]:
+    """The signatures among some outcomes, as they come; the errors go to ``failures``.
+
+    Parameters
+    ----------
+    outcomes : iterator of Outcome
+        As `compute_many` yields them.
+    total : int
+        Number of outcomes, for ``progress``.
+    failures : list of str
+        Appended with the error line of each outcome that failed.
+    strict : bool
+        Stop at the first outcome that failed.
+    progress : callable, optional
+        ``progress(outcomes, total)`` wraps the iterator and yields the same outcomes, e.g. to
+        show a progress bar.
+
+    Yields
+    ------
+    path : Path
+        A mesh file that gave a signature.
+    signature : Signature
+        Its signature.
+    """
+    for outcome in progress(outcomes, total) if progress else outcomes:
+        if outcome.signature is None:
+            failures.append(outcome.error)
+            if strict:
+                return
+            continue
+        yield outcome.path, outcome.signature
 
 
 def _compute_on_cluster(
@@ -261,23 +294,21 @@ def _isolated(path: Path, params: Params, solver: str, compute: Compute) -> Outc
 
 def _pool(jobs: int) -> ProcessPoolExecutor:
     """A process pool of fresh interpreters with one BLAS/OpenMP thread each."""
-    saved = {var: os.environ.get(var) for var in _THREAD_VARS}
-    os.environ.update(dict.fromkeys(_THREAD_VARS, "1"))
-    try:
-        ctx = multiprocessing.get_context("spawn")
-        pool = ProcessPoolExecutor(
-            jobs, mp_context=ctx, initializer=_exit_with_parent, initargs=(os.getpid(),)
-        )
-        # Each submit while no task has finished spawns a worker: all start with the variables.
-        for future in [pool.submit(int) for _ in range(jobs)]:
-            future.result()
-    finally:
-        for var, value in saved.items():
-            if value is None:
-                os.environ.pop(var, None)
-            else:
-                os.environ[var] = value
-    return pool
+    ctx = multiprocessing.get_context("spawn")
+    return ProcessPoolExecutor(
+        jobs, mp_context=ctx, initializer=_start_worker, initargs=(os.getpid(),)
+    )
+
+
+def _start_worker(parent: int) -> None:
+    """In a new worker: one thread per native thread pool, and exit when the parent dies."""
+    from threadpoolctl import threadpool_limits
+
+    from .conformal import available_solvers
+
+    available_solvers()  # loads the solver libraries, so that the limit reaches their pools too
+    threadpool_limits(1)  # stays in force for the life of the worker
+    _exit_with_parent(parent)
 
 
 def _exit_with_parent(parent: int) -> None:

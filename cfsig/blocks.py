@@ -98,7 +98,7 @@ def read_block(dataset: h5py.Dataset, block: Block, buffer: np.ndarray) -> np.nd
         dataset.read_direct(out, np.s_[block.start : block.stop])
         return out
     handle = dataset.file.id.get_vfd_handle()
-    if os.preadv(handle, [memoryview(out).cast("B")], block.offset) != out.nbytes:
+    if os.preadv(handle, [out.data.cast("B")], block.offset) != out.nbytes:
         raise IndexFileError(f"{dataset.file.filename}: the file ends inside the signatures")
     return out
 

@@ -24,6 +24,8 @@ treat every descriptor alike.
 
 from __future__ import annotations
 
+from typing import TypedDict
+
 import numpy as np
 
 from .conformal import ConformalFactor
@@ -32,9 +34,20 @@ from .spectrum import heat_kernel_signature, laplace_spectrum
 QUANTILES = 64
 EIGENPAIRS = 30
 TIMES = (0.005, 0.01, 0.02, 0.04)  # diffusion time / surface area
+
+
 # Medians of the channel distances over all pairs of SHREC 2007's 400 meshes, without their
 # labels: `python benchmarks/descriptors.py scales` prints them.
-SCALES = {
+class Scales(TypedDict):
+    """The channel scales: one number per channel, one per diffusion time for ``heat``."""
+
+    phi: float
+    spectrum: float
+    heat: tuple[float, float, float, float]
+    heat_sum: float
+
+
+SCALES: Scales = {
     "phi": 1.834,
     "spectrum": 0.2815,
     "heat": (0.1176, 0.1588, 0.2298, 0.2984),
@@ -87,9 +100,11 @@ def channels(cf: ConformalFactor) -> dict[str, np.ndarray]:
     SolverError
         The eigenvalue iteration failed.
     """
-    spectrum = laplace_spectrum(cf.laplacian, cf.vertex_area, cf.labels, cf.solve, EIGENPAIRS)
+    spectrum = laplace_spectrum(
+        cf.operators.laplacian, cf.operators.vertex_area, cf.operators.labels, cf.solve, EIGENPAIRS
+    )
     area = spectrum.area
-    weights = cf.vertex_area / area
+    weights = cf.operators.vertex_area / area
     scaled = np.log(spectrum.eigenvalues * area)
     scaled = np.concatenate([scaled, np.full(EIGENPAIRS - len(scaled), scaled[-1])])
     hks = heat_kernel_signature(spectrum, np.asarray(TIMES) * area)

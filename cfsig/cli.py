@@ -10,32 +10,25 @@ from contextlib import contextmanager
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import click
-import numpy as np
 
-from . import __version__, render
-from .batch import index_meshes
-from .conformal import SOLVERS
 from .errors import CfsigError
-from .evaluate import (
-    Collection,
-    Evaluation,
-    collection_from_index,
-    compute_collection,
-    evaluate_collections,
-    read_cla,
-)
-from .index import IndexReader, IndexWriter
-from .params import DESCRIPTORS, REPAIR_MODES, Params
-from .report import write_report
-from .search import search
-from .signature import mesh_and_signature, signature_file
+from .params import DESCRIPTORS, REPAIR_MODES, SOLVERS, Params
+
+if TYPE_CHECKING:  # each command imports what it uses, so that `cfsig --help` starts fast
+    from .evaluate import Collection, Evaluation
+    from .measures import RetrievalReport
+    from .signature import Signature
 
 EXIT_ERROR = 1
 EXIT_SKIPPED = 3
 RETRIEVAL_DESCRIPTOR = "cfhks"  # the default of index and evaluate: docs/descriptors.md
 _GRID_COLUMNS = 7  # tiles per row of a single query's --png grid
+_FILE = click.Path(dir_okay=False, path_type=Path)
+_FOLDER = click.Path(file_okay=False, path_type=Path)
+_PATH = click.Path(path_type=Path)  # a file or a folder
 
 _params_options = [
     click.option(
@@ -78,6 +71,12 @@ _jobs_option = click.option(
 _json_option = click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 
 
+def _count_option(*names: str, default: int, help: str) -> Callable:
+    """An option taking a positive integer, its default shown in the help."""
+    count = click.IntRange(min=1)
+    return click.option(*names, type=count, default=default, show_default=True, help=help)
+
+
 def _with(options: list[Callable]) -> Callable:
     """Apply several click options to a command."""
 
@@ -89,7 +88,7 @@ def _with(options: list[Callable]) -> Callable:
     return decorate
 
 
-def _params(base: Params | None = None, **given: object) -> Params:
+def _params(base: Params | None = None, **given: Any) -> Params:
     """Parameters from the options that were given, on top of ``base`` or the defaults."""
     try:
         return replace(base or Params(), **{k: v for k, v in given.items() if v is not None})
@@ -97,7 +96,7 @@ def _params(base: Params | None = None, **given: object) -> Params:
         raise click.BadParameter(str(exc)) from None
 
 
-def _fail(message: str, code: int = EXIT_ERROR) -> None:
+def _fail(message: str, code: int = EXIT_ERROR) -> NoReturn:
     """Print one error line and exit."""
     click.echo(f"Error: {message}", err=True)
     sys.exit(code)
@@ -114,7 +113,7 @@ def _report_skipped(skipped: list[str], strict: bool) -> None:
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(__version__, prog_name="cfsig")
+@click.version_option(package_name="cfsig", prog_name="cfsig")
 def main() -> None:
     """Pose-invariant 3D shape retrieval with conformal-factor signatures.
 
@@ -125,29 +124,29 @@ def main() -> None:
 
 
 @main.command()
-@click.argument("meshes", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.argument("meshes", nargs=-1, required=True, type=_PATH)
 @_with(_params_options)
 @_descriptor_option
 @_solver_option
 @_json_option
 @click.option(
     "--save",
-    type=click.Path(file_okay=False, path_type=Path),
+    type=_FOLDER,
     help="Write DIR/<name>.npz with the signature and per-vertex phi.",
 )
 @click.option(
     "--png",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="Draw the meshes side by side coloured by phi scaled to [0, 1].",
 )
 @click.option(
     "--ply",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="Write the mesh with per-vertex colours of phi (one mesh only).",
 )
 @click.option(
     "--hist",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="Plot the signature histograms overlaid.",
 )
 def compute(
@@ -168,7 +167,13 @@ def compute(
     )
     if hist and params.descriptor != "cf":
         raise click.UsageError("--hist plots the histograms of the cf descriptor")
-    rows, failed, drawn = [], [], []
+    import numpy as np
+
+    from .signature import mesh_and_signature
+
+    rows: list[dict] = []
+    failed: list[str] = []
+    drawn: list = []
     for path in meshes:
         try:
             mesh, sig = mesh_and_signature(path, params, solver)
@@ -186,7 +191,7 @@ def compute(
             save.mkdir(parents=True, exist_ok=True)
             np.savez(
                 save / f"{path.stem}.npz",
-                signature=sig.histogram,
+                signature=sig.vector,
                 phi=sig.phi,
                 params=params.to_json(),
             )
@@ -204,7 +209,7 @@ def compute(
     _report_errors(failed)
 
 
-def _describe(path: Path, sig) -> dict:
+def _describe(path: Path, sig: Signature) -> dict:
     """The facts `compute` reports about one signature."""
     low, high = sig.phi_range
     return {
@@ -230,12 +235,12 @@ def _report_errors(errors: list[str]) -> None:
 
 
 @main.command()
-@click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.argument("paths", nargs=-1, required=True, type=_PATH)
 @click.option(
     "-o",
     "--output",
     required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="The index file (HDF5); created, or updated with new and changed meshes.",
 )
 @_with(_params_options)
@@ -248,11 +253,9 @@ def _report_errors(errors: list[str]) -> None:
     "processes; the mesh paths must be readable on the workers. Needs the dask extra.",
 )  # fmt: skip
 @click.option("--strict", is_flag=True, help="Stop at the first file that fails.")
-@click.option(
+@_count_option(
     "--commit-every",
-    type=click.IntRange(min=1),
     default=200,
-    show_default=True,
     help="Commit to the index file after this many meshes (and every 30 s).",
 )
 def index(
@@ -284,6 +287,10 @@ def index(
     """
     if jobs is not None and scheduler is not None:
         raise click.UsageError("give --jobs or --scheduler, not both")
+    from .batch import index_meshes
+    from .index import IndexReader, IndexWriter
+
+    routes: Counter[str] = Counter()
     try:
         base = None
         if output.exists():
@@ -294,14 +301,14 @@ def index(
             base, normalize=normalize, seed=seed, bins=bins, repair=repair, descriptor=descriptor
         )
         with IndexWriter(output, params) as writer:
-            routes: Counter[str] = Counter()
             bar = partial(_progress, what="indexing", routes=routes)
             added, skipped = index_meshes(
                 writer, paths, solver, jobs, scheduler, strict, commit_every, bar
             )
+        total = len(writer.known)  # after the last commit
     except CfsigError as exc:
         _fail(str(exc))
-    click.echo(f"{output}: {added} meshes added or updated, {len(writer.known)} in the index")
+    click.echo(f"{output}: {added} meshes added or updated, {total} in the index")
     if routes:
         click.echo(_format_routes(routes))
     _report_skipped(skipped, strict)
@@ -325,20 +332,14 @@ def _format_routes(routes: Counter[str]) -> str:
 
 
 @main.command()
-@click.argument("index_file", type=click.Path(dir_okay=False, path_type=Path))
-@click.argument("meshes", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option(
-    "-k",
-    type=click.IntRange(min=1),
-    default=20,
-    show_default=True,
-    help="Number of results per query.",
-)
+@click.argument("index_file", type=_FILE)
+@click.argument("meshes", nargs=-1, required=True, type=_PATH)
+@_count_option("-k", default=20, help="Number of results per query.")
 @_solver_option
 @_json_option
 @click.option(
     "--png",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="Draw each query and its results as framed thumbnails.",
 )
 def query(index_file, meshes, k, solver, as_json, png) -> None:
@@ -353,9 +354,15 @@ def query(index_file, meshes, k, solver, as_json, png) -> None:
       cfsig query shrec07.h5 shrec07/ant/81.off -k 10
       cfsig query shrec07.h5 shrec07/ant/81.off --png ant.png
     """
+    import numpy as np
+
+    from .index import IndexReader
+    from .nearest import search
+    from .signature import signature_file
+
     try:
         with IndexReader(index_file) as reader:
-            sigs = [signature_file(path, reader.params, solver).histogram for path in meshes]
+            sigs = [signature_file(path, reader.params, solver).vector for path in meshes]
             results = search(reader, np.array(sigs), k)
             classes = set(reader.column("labels")) if png else set()
     except CfsigError as exc:
@@ -384,16 +391,16 @@ def query(index_file, meshes, k, solver, as_json, png) -> None:
 
 
 @main.command()
-@click.argument("folder", required=False, type=click.Path(file_okay=False, path_type=Path))
+@click.argument("folder", required=False, type=_FOLDER)
 @click.option(
     "--classes",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="Classes from a Princeton Shape Benchmark .cla file instead of subfolders.",
 )
 @click.option(
     "--index",
     "index_file",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="Evaluate the signatures of an index instead of computing them.",
 )
 @click.option(
@@ -409,13 +416,13 @@ def query(index_file, meshes, k, solver, as_json, png) -> None:
 @_json_option
 @click.option(
     "--plot",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_FILE,
     help="Plot the precision/recall curves, overall and per class.",
 )
 @click.option(
     "--report",
     "report_dir",
-    type=click.Path(file_okay=False, path_type=Path),
+    type=_FOLDER,
     help="Write DIR/index.html: measures, curves and one query per class.",
 )
 def evaluate(
@@ -456,6 +463,9 @@ def evaluate(
     wanted = _descriptor_list(descriptors)
     if len(wanted) > 1 and (plot or report_dir):
         raise click.UsageError("--plot and --report take one descriptor")
+    from .cla import read_cla
+    from .evaluate import collection_from_index, evaluate_collections
+
     try:
         cla = read_cla(classes) if classes else None
     except OSError as exc:
@@ -464,11 +474,11 @@ def evaluate(
         _fail(str(exc))
     skipped: list[str] = []
     routes: Counter[str] = Counter()  # of the first descriptor: the others' are the same
+    collections: dict[str, Collection] = {}
     try:
         if index_file:
             collections = dict([collection_from_index(index_file)])
         else:
-            collections = {}
             for name in wanted:
                 params = _params(
                     normalize=normalize, seed=seed, bins=bins, repair=repair, descriptor=name
@@ -532,6 +542,8 @@ def _compute_folder(
     routes: Counter[str],
 ) -> Collection:
     """A folder's collection under a progress bar; failures go to ``skipped``, exit if none."""
+    from .evaluate import compute_collection
+
     bar = partial(_progress, what=f"computing {params.descriptor}", routes=routes)
     collection, failures = compute_collection(folder, params, solver, jobs, strict, bar)
     skipped += failures
@@ -558,7 +570,7 @@ def _format_side_by_side(results: dict[str, Evaluation]) -> str:
     return "\n".join(lines)
 
 
-def _format_report(report) -> str:
+def _format_report(report: RetrievalReport) -> str:
     """The measures as text tables."""
     keys = list(report.measures)
     lines = [f"{report.count} queries", f"{'class':<16}" + "".join(f"{k:>8}" for k in keys)]
@@ -571,7 +583,7 @@ def _format_report(report) -> str:
 @main.command()
 @click.option(
     "--out",
-    type=click.Path(file_okay=False, path_type=Path),
+    type=_FOLDER,
     default="cfsig-demo",
     show_default=True,
     help="Folder for the generated meshes and the index.",
@@ -623,40 +635,48 @@ def _warn_undrawn(problems: list[str]) -> None:
 
 def _compute_pictures(drawn: list, params: Params, png, ply, hist) -> None:
     """The pictures of `compute`: phi on the meshes, a coloured PLY, the histograms."""
+    from . import figures
+
     with _writing_pictures():
         if png:
-            render.render_phi([(mesh, sig.phi, name) for name, mesh, sig in drawn], png)
+            figures.render_phi([(mesh, sig.phi, name) for name, mesh, sig in drawn], png)
         if ply:
             _, mesh, sig = drawn[0]
-            render.write_ply(mesh, sig.phi, ply)
+            figures.write_ply(mesh, sig.phi, ply)
         if hist:
             names = [name for name, _, _ in drawn]
-            hists = [sig.histogram for _, _, sig in drawn]
-            render.plot_histograms(hists, names, params.edges, hist)
+            hists = [sig.vector for _, _, sig in drawn]
+            figures.plot_histograms(hists, names, params.edges, hist)
 
 
 def _query_picture(png: Path, meshes, results, classes: set[str]) -> None:
     """The grid of each query (one row per query, wrapped) and its results."""
+    from . import figures
+    from .mesh import mesh_label
+
     rows = []
     for path, hits in zip(meshes, results, strict=True):
-        label = path.parent.name if path.parent.name in classes else None
-        tiles = render.retrieval_row(
+        label = mesh_label(path) if mesh_label(path) in classes else None
+        tiles = figures.retrieval_row(
             (str(path), _short(path), label),
             [(h.entry.path, h.entry.name, h.entry.label, h.distance) for h in hits],
         )
         width = len(tiles) if len(meshes) > 1 else min(len(tiles), _GRID_COLUMNS)
         rows += [tiles[i : i + width] for i in range(0, len(tiles), width)]
     with _writing_pictures():
-        _warn_undrawn(render.render_grid(rows, png))
+        _warn_undrawn(figures.render_grid(rows, png))
 
 
 def _evaluate_pictures(plot, report_dir, result: Evaluation) -> None:
     """The precision/recall plot and the HTML report of `evaluate`."""
+    from . import figures
+    from .report import write_report
+
     report, kept = result.report, result.collection
     columns = (kept.names, kept.labels, kept.paths)
     with _writing_pictures():
         if plot:
-            render.plot_precision_recall(
+            figures.plot_precision_recall(
                 report.class_precision_recall, report.precision_recall, plot
             )
         if report_dir:

@@ -12,55 +12,10 @@ import scipy.sparse.linalg as spla
 from . import geometry
 from .errors import MissingDependencyError, SolverError
 from .mesh import Mesh
+from .params import SOLVERS
 
-SOLVERS = ("auto", "cholmod", "eigen", "scipy")
 # The order "auto" tries the backends in: fastest first, as measured by benchmarks/solvers.py.
 _PREFERENCE = ("cholmod", "eigen", "scipy")
-
-
-@dataclass(frozen=True)
-class ConformalFactor:
-    """The conformal factor of a mesh and what was computed on the way.
-
-    Attributes
-    ----------
-    phi : (n,) float64
-        Conformal factor per vertex (dimensionless, log of the length scale), zero mean on every
-        connected component.
-    curvature : (n,) float64
-        Angle defects K^orig, radians.
-    target : (n,) float64
-        Target curvature K^T, radians.
-    face_areas : (m,) float64
-        Triangle areas of the (mollified) metric.
-    n_components : int
-        Number of connected components.
-    mollified : float
-        Length added to every edge by the intrinsic mollification (0 if none was needed).
-    curvature_error : float
-        ``||K^T - K^R|| / |V| / pi``, paper section 3.4.
-    laplacian : (n, n) scipy.sparse.csc_matrix
-        The cotangent Laplacian L of the (mollified) metric.
-    vertex_area : (n,) float64
-        Barycentric vertex areas, the lumped mass matrix.
-    labels : (n,) int
-        Connected component of each vertex.
-    solve : callable
-        The factorised L (`factorize_laplacian`), for further solves at the cost of one
-        forward and back substitution each.
-    """
-
-    phi: np.ndarray
-    curvature: np.ndarray
-    target: np.ndarray
-    face_areas: np.ndarray
-    n_components: int
-    mollified: float
-    curvature_error: float
-    laplacian: sp.csc_matrix
-    vertex_area: np.ndarray
-    labels: np.ndarray
-    solve: Callable[[np.ndarray], np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -101,6 +56,30 @@ class Operators:
     vertex_area: np.ndarray
     target: np.ndarray
     laplacian: sp.csc_matrix
+
+
+@dataclass(frozen=True)
+class ConformalFactor:
+    """The conformal factor of a mesh and the operators it was solved with.
+
+    Attributes
+    ----------
+    phi : (n,) float64
+        Conformal factor per vertex (dimensionless, log of the length scale), zero mean on every
+        connected component.
+    operators : Operators
+        The mesh's curvature, target curvature, Laplacian, areas and components (`operators`).
+    curvature_error : float
+        ``||K^T - K^R|| / |V| / pi``, paper section 3.4.
+    solve : callable
+        The factorised L (`factorize_laplacian`), for further solves at the cost of one
+        forward and back substitution each.
+    """
+
+    phi: np.ndarray
+    operators: Operators
+    curvature_error: float
+    solve: Callable[[np.ndarray], np.ndarray]
 
 
 def operators(mesh: Mesh, mollify: float = 1e-5) -> Operators:
@@ -160,10 +139,7 @@ def conformal_factor(mesh: Mesh, mollify: float = 1e-5, solver: str = "auto") ->
     solve = factorize_laplacian(ops.laplacian, ops.labels, solver)
     phi = solve(ops.target - ops.curvature)
     error = curvature_error(ops.lengths, mesh.faces, ops.boundary, phi, ops.target)
-    return ConformalFactor(
-        phi, ops.curvature, ops.target, ops.face_areas, ops.n_components, ops.mollified, error,
-        ops.laplacian, ops.vertex_area, ops.labels, solve,
-    )  # fmt: skip
+    return ConformalFactor(phi, ops, error, solve)
 
 
 def curvature_error(
@@ -199,40 +175,13 @@ def curvature_error(
     """
     corner_phi = phi[faces]
     edge_phi = corner_phi[:, [1, 2, 0]] + corner_phi[:, [2, 0, 1]]
+    # A face's angles do not change when all three of its lengths are scaled alike, so each
+    # face's exponents are taken relative to its smallest: no length grows, none overflows
+    # where phi is huge.
+    edge_phi -= edge_phi.min(axis=1, keepdims=True)
     scaled = lengths * np.exp(-edge_phi / 2)
     reached = geometry.angle_defect(geometry.corner_angles(scaled), faces, boundary)
     return float(np.linalg.norm(target - reached) / len(phi) / np.pi)
-
-
-def solve_laplacian(
-    laplacian: sp.spmatrix, rhs: np.ndarray, labels: np.ndarray, solver: str = "auto"
-) -> np.ndarray:
-    """Solve ``L x = rhs`` for a cotangent Laplacian, zero mean per connected component.
-
-    The same as ``factorize_laplacian(laplacian, labels, solver)(rhs)``.
-
-    Parameters
-    ----------
-    laplacian : (n, n) sparse float64
-        Symmetric negative semidefinite Laplacian whose null space is the per-component constants.
-    rhs : (n,) float64
-        Right-hand side, summing to zero per component.
-    labels : (n,) int
-        Connected component of each vertex.
-    solver : {"auto", "cholmod", "eigen", "scipy"}
-        Sparse solver backend, see `factorize_laplacian`.
-
-    Returns
-    -------
-    x : (n,) float64
-        The solution with zero mean on every component.
-
-    Raises
-    ------
-    SolverError, ValueError, MissingDependencyError
-        As `factorize_laplacian`; `SolverError` also for a non-finite ``rhs`` or solution.
-    """
-    return factorize_laplacian(laplacian, labels, solver)(rhs)
 
 
 def factorize_laplacian(
@@ -346,7 +295,7 @@ def factorize(matrix: sp.csc_matrix, solver: str) -> Callable[[np.ndarray], np.n
     matrix : (k, k) scipy.sparse.csc_matrix
         Symmetric positive definite, e.g. from `pinned_system`.
     solver : {"auto", "cholmod", "eigen", "scipy"}
-        Backend, see `solve_laplacian`.
+        Backend, see `factorize_laplacian`.
 
     Returns
     -------

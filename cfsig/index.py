@@ -9,24 +9,26 @@ and ``cfsig_version``.
 Writes are copy-on-write: a commit copies the file, appends to the copy, syncs it to disk and
 renames it over the original, so a reader, or a process killed at any moment, only ever sees a
 complete committed state. One writer at a time holds an exclusive lock on ``INDEX.lock``.
+
+cfsig runs on POSIX systems (Linux, macOS): the lock is ``flock`` and queries read with
+``preadv``. ``fcntl`` is imported by the writer only, so that this module imports anywhere.
 """
 
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import IO, TYPE_CHECKING
 
 import h5py
 import numpy as np
 
 from . import __version__
 from .errors import IndexFileError
-from .params import Params
+from .params import Params, signature_length
 
 if TYPE_CHECKING:  # importing the signature code would load scipy on the query path
     from .signature import Signature
@@ -261,7 +263,7 @@ class IndexWriter:
         records = list(latest.values())
         picks = [records[i] for i in order]
         columns = {
-            "signatures": np.array([s.histogram for _, s in picks], dtype=np.float32),
+            "signatures": np.array([s.vector for _, s in picks], dtype=np.float32),
             "names": [e.name for e, _ in picks],
             "labels": [e.label for e, _ in picks],
             "paths": [e.path for e, _ in picks],
@@ -285,8 +287,6 @@ def _create_layout(f: h5py.File, params: Params) -> None:
         params=params.to_json(),
         cfsig_version=__version__,
     )
-    from .signature import signature_length  # here: the query path never loads scipy
-
     width = signature_length(params)
     f.create_dataset(
         "signatures", (0, width), np.float32, maxshape=(None, width), chunks=(_CHUNK_ROWS, width)
@@ -321,8 +321,12 @@ def _check_header(f: h5py.File, path: Path) -> Params:
         raise IndexFileError(f"{path}: unreadable parameters ({exc})") from None
 
 
-def _acquire_lock(path: Path):
+def _acquire_lock(path: Path) -> IO[str]:
     """Take the writer's lock file, failing at once if another process holds it."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: the module docstring says why
+        raise IndexFileError(f"{path}: writing an index needs a POSIX system (flock)") from None
     path.parent.mkdir(parents=True, exist_ok=True)
     lock = open(path.with_name(path.name + ".lock"), "a+")  # noqa: SIM115
     try:

@@ -8,6 +8,7 @@ space is capped with ``RLIMIT_AS`` and it is killed when the time runs out. POSI
 
 from __future__ import annotations
 
+import faulthandler
 import os
 import pickle
 import resource
@@ -98,6 +99,7 @@ def run_limited(func: Callable[..., Any], args: tuple, limits: Limits, what: str
 def _child(func: Callable[..., Any], args: tuple, limits: Limits, write_end: int) -> None:
     """In the child: limit memory, silence output, run, send the pickled outcome, exit."""
     try:
+        faulthandler.disable()  # a crash is reported by the parent, not dumped by the child
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, 1)
         os.dup2(devnull, 2)
@@ -118,7 +120,7 @@ def _child(func: Callable[..., Any], args: tuple, limits: Limits, write_end: int
 
 def _read_until(fd: int, deadline: float) -> bytes | None:
     """Everything written to a pipe until its writer closes it, or None at the deadline."""
-    chunks = []
+    chunks: list[bytes] = []
     while True:
         left = deadline - time.monotonic()
         if left <= 0 or not select.select([fd], [], [], left)[0]:

@@ -128,7 +128,7 @@ def parse_mesh(data: bytes, path: str | os.PathLike) -> Mesh:
         raise MeshError(f"{path}: {exc}") from None
 
 
-def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
+def clean_mesh(vertices: np.ndarray, faces: np.ndarray, weld: bool = True) -> Mesh:
     """Check a triangle mesh and repair what can be repaired soundly.
 
     Repairs: exactly coincident vertices are merged (STL files store triangle soups), faces that
@@ -141,6 +141,9 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
         Vertex positions.
     faces : (m, 3) array_like of int
         Triangles.
+    weld : bool
+        Merge coincident vertices; off for a mesh already cleaned once, whose split vertices
+        coincide with the vertex they copy.
 
     Returns
     -------
@@ -169,7 +172,8 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
             f"but there are {len(vertices)} vertices"
         )
     repairs: list[str] = []
-    if _has_duplicate_rows(vertices + 0.0):  # + 0.0 turns -0.0 into 0.0, which compares equal
+    # + 0.0 turns -0.0 into 0.0, which compares equal
+    if weld and _has_duplicate_rows(vertices + 0.0):
         unique, inverse = np.unique(vertices, axis=0, return_inverse=True)
         repairs.append(f"merged {len(vertices) - len(unique)} coincident vertices")
         vertices, faces = unique, inverse.reshape(-1)[faces]
@@ -191,7 +195,7 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
         repairs.append(f"removed {int((~used).sum())} unreferenced vertices")
         remap = np.cumsum(used) - 1
         vertices, faces = vertices[used], remap[faces]
-    edges = mesh_edges(faces, len(vertices))
+    edges: Edges | None = mesh_edges(faces, len(vertices))
     split_faces, copies = split_nonmanifold(faces, len(vertices), edges)
     if len(copies):
         repairs.append(f"split {len(np.unique(copies))} non-manifold vertices into separate sheets")
@@ -334,7 +338,7 @@ def _parse_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     if plain is not None:
         return plain
     tokens = data.split()
-    if not tokens[0].upper().endswith(b"OFF"):
+    if not tokens or not tokens[0].upper().endswith(b"OFF"):
         raise MeshError("not an OFF file (no OFF header)")
     try:
         n_v, n_f = int(tokens[1]), int(tokens[2])
@@ -445,6 +449,7 @@ def _parse_trimesh(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray]:
         raise MissingDependencyError("reading OBJ, PLY and STL needs trimesh") from None
     try:
         loaded = trimesh.load(io.BytesIO(data), file_type=suffix[1:], process=False, force="mesh")
+        assert isinstance(loaded, trimesh.Trimesh)  # force="mesh" makes one
         return np.asarray(loaded.vertices), np.asarray(loaded.faces)
     except Exception as exc:  # trimesh raises many types on malformed files
         raise MeshError(f"malformed {suffix[1:].upper()}: {exc}") from None
@@ -480,3 +485,19 @@ def find_meshes(paths: Iterable[str | os.PathLike]) -> Iterator[tuple[Path, str]
                 if Path(file).suffix.lower() in MESH_SUFFIXES and not file.startswith("."):
                     path = Path(folder) / file
                     yield path, path.relative_to(root).as_posix()
+
+
+def mesh_label(path: str | os.PathLike) -> str:
+    """The class label of a mesh file: the name of the folder that holds it.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A mesh file, e.g. ``shrec07/ant/81.off``.
+
+    Returns
+    -------
+    label : str
+        E.g. ``ant``; empty for a relative path without a folder.
+    """
+    return Path(path).parent.name

@@ -7,6 +7,10 @@ from dataclasses import asdict, dataclass, fields
 
 DESCRIPTORS = ("cf", "cfhks")
 REPAIR_MODES = ("auto", "off", "proxy")
+# The length of the cfhks vector: QUANTILES + EIGENPAIRS + QUANTILES * len(TIMES) of `cfsig.cfhks`
+# (tests/test_cfhks.py checks that the two agree), here so that an index needs no SciPy.
+CFHKS_LENGTH = 64 + 30 + 64 * 4
+SOLVERS = ("auto", "cholmod", "eigen", "scipy")  # sparse solver backends (`cfsig.conformal`)
 
 
 @dataclass(frozen=True)
@@ -92,3 +96,19 @@ class Params:
         if unknown:
             raise ValueError(f"unknown parameters {sorted(unknown)}")
         return cls(**data)
+
+
+def signature_length(params: Params) -> int:
+    """Length of the signature vectors that ``params`` make.
+
+    Parameters
+    ----------
+    params : Params
+        Signature parameters.
+
+    Returns
+    -------
+    length : int
+        ``params.bins`` for ``cf``; the descriptor's fixed length otherwise.
+    """
+    return params.bins if params.descriptor == "cf" else CFHKS_LENGTH

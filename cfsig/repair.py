@@ -33,7 +33,9 @@ from .params import REPAIR_MODES
 
 # Boundary vertices of different parts closer than this fraction of the bounding-box diagonal
 # are stitched together.
-STITCH_DISTANCE = 0.01
+STITCH_DISTANCE = 0.02
+# A part's faces within this fraction of the diagonal of a larger part's surface cover it twice.
+OVERLAP_DISTANCE = 0.002
 # Open parts with less than this fraction of the total area are fragments, dropped.
 FRAGMENT_AREA = 0.01
 # Local repairs are tried on at most this many parts; beyond, the proxy is built directly.
@@ -88,27 +90,30 @@ def repair_mesh(mesh: Mesh, mode: str = "auto", limits: Limits | None = None) ->
 
 
 def _local_repairs(mesh: Mesh, labels: np.ndarray) -> Mesh | None:
-    """Stitch, drop fragments, fill holes, drop enclosed parts; None unless one closed part."""
+    """Trim overlaps, stitch, drop fragments, fill holes, drop enclosed parts.
+
+    Returns None unless the result is one closed manifold.
+    """
     done = list(mesh.repairs)
     vertices, faces = mesh.vertices, mesh.faces
     diagonal = float(np.linalg.norm(np.ptp(vertices, axis=0)))
-    boundary = _boundary_vertices(mesh_edges(faces, len(vertices)), len(vertices))
-    merged = stitch(vertices, labels, boundary, STITCH_DISTANCE * diagonal)
-    if merged is not None:
-        vertices, count = merged
-        faces = clean_mesh(vertices, faces)
-        vertices, faces = faces.vertices, faces.faces
-        done.append(f"stitched {count} pairs of boundary vertices between parts")
-    vertices, faces, dropped = drop_fragments(vertices, faces, FRAGMENT_AREA)
+    faces, trimmed = trim_overlaps(vertices, faces, labels, OVERLAP_DISTANCE * diagonal)
+    if trimmed:
+        done.append(f"dropped {trimmed} faces lying on another part's surface")
+    vertices, faces = _tidy(vertices, faces)
+    vertices, faces, stitched = stitch(vertices, faces, STITCH_DISTANCE * diagonal)
+    if stitched:
+        done.append(f"stitched {stitched} pairs of boundary vertices between parts")
+    vertices, faces, dropped = drop_fragments(*_tidy(vertices, faces), FRAGMENT_AREA)
     if dropped:
         done.append(f"dropped {dropped} small open fragments")
-    vertices, faces, filled = fill_holes(vertices, faces)
+    vertices, faces, filled = fill_holes(*_tidy(vertices, faces))
     if filled:
         done.append(f"closed {filled} holes")
-    vertices, faces, enclosed = drop_enclosed(vertices, faces)
+    vertices, faces, enclosed = drop_enclosed(*_tidy(vertices, faces))
     if enclosed:
         done.append(f"dropped {enclosed} parts enclosed by another")
-    result = clean_mesh(vertices, faces)
+    result = clean_mesh(vertices, faces, weld=False)
     edges = result.edges if result.edges is not None else mesh_edges(result.faces, len(vertices))
     n_parts, _ = _parts(edges.ends, len(result.vertices))
     if n_parts != 1 or not np.all(np.diff(edges.starts) == 2):
@@ -116,50 +121,156 @@ def _local_repairs(mesh: Mesh, labels: np.ndarray) -> Mesh | None:
     return replace(result, repairs=tuple(done), route="repaired")
 
 
-def stitch(
-    vertices: np.ndarray, labels: np.ndarray, boundary: np.ndarray, distance: float
-) -> tuple[np.ndarray, int] | None:
-    """Merge boundary vertices of different parts that are each other's nearest.
+def _tidy(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`clean_mesh` without welding: faces that became degenerate or repeated go, fans split."""
+    mesh = clean_mesh(vertices, faces, weld=False)
+    return mesh.vertices, mesh.faces
+
+
+def trim_overlaps(
+    vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, distance: float
+) -> tuple[np.ndarray, int]:
+    """Drop the faces of a part that lie on the surface of a larger part (a surface covered twice).
+
+    Parts are taken from the largest; a face whose three vertices all lie within ``distance``
+    of the faces kept so far is dropped.
 
     Parameters
     ----------
     vertices : (n, 3) float64
         Vertex positions.
+    faces : (m, 3) int64
+        Triangles.
     labels : (n,) int
-        Part (connected component) of each vertex.
-    boundary : (n,) bool
-        Vertices on a boundary edge.
+        Part of each vertex.
+    distance : float
+        Largest distance of a face's vertices to the other surface, in length units.
+
+    Returns
+    -------
+    faces : (m', 3) int64
+        The faces kept.
+    dropped : int
+        Number of faces dropped.
+    """
+    import igl
+
+    face_part = labels[faces[:, 0]]
+    n_parts = int(labels.max()) + 1
+    if n_parts < 2:
+        return faces, 0
+    area = np.bincount(face_part, face_areas(edge_lengths(vertices, faces)), n_parts)
+    keep = np.zeros(len(faces), dtype=bool)
+    order = np.argsort(-area, kind="stable")
+    keep[face_part == order[0]] = True
+    for part in order[1:]:
+        mine = np.flatnonzero(face_part == part)
+        corners = np.unique(faces[mine])
+        squared = igl.point_mesh_squared_distance(vertices[corners], vertices, faces[keep])[0]
+        near = np.zeros(len(vertices), dtype=bool)
+        near[corners] = squared <= distance**2
+        keep[mine[~near[faces[mine]].all(axis=1)]] = True
+    return faces[keep], int(len(faces) - keep.sum())
+
+
+def stitch(
+    vertices: np.ndarray, faces: np.ndarray, distance: float
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Zip together the boundaries of different parts that run side by side.
+
+    Seeds are pairs of boundary vertices of different parts within ``distance``, shortest
+    first, each vertex paired at most once. From each seed the two boundaries are walked in
+    step, both ways, pairing vertex after vertex while each next pair is within ``distance``
+    and on two parts. Each pair is merged at its midpoint.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        Vertex positions.
+    faces : (m, 3) int64
+        Triangles with at most two faces per edge and one fan per vertex.
     distance : float
         Largest distance between two vertices to merge, in length units.
 
     Returns
     -------
-    result : tuple or None
-        The vertices with each merged pair moved to its midpoint (they then coincide, and
-        `clean_mesh` welds them) and the number of pairs; None when no pair qualifies.
+    vertices : (n, 3) float64
+        With each merged pair's first vertex moved to the midpoint.
+    faces : (m, 3) int64
+        With each pair's second vertex replaced by its first (unreferenced vertices and faces
+        that became degenerate are left for `clean_mesh`).
+    stitched : int
+        Number of pairs merged.
     """
-    candidates = np.flatnonzero(boundary)
-    if len(candidates) < 2:
-        return None
+    n = len(vertices)
+    edges = mesh_edges(faces, n)
+    _, labels = _parts(edges.ends, n)
+    loops = boundary_loops(edges, n)
+    if len(loops) < 2:
+        return vertices, faces, 0
+    following, preceding = np.full(n, -1), np.full(n, -1)
+    for loop in loops:
+        following[loop], preceding[loop] = np.roll(loop, -1), np.roll(loop, 1)
+    seeds, shift = _seeds(vertices, labels, np.concatenate(loops), distance)
+
+    def gap(x: int, y: int) -> float:
+        """The distance of x and y once y's part is moved back onto x's."""
+        offset = shift.get((labels[x], labels[y]))
+        return (
+            np.inf if offset is None else float(np.linalg.norm(vertices[y] - offset - vertices[x]))
+        )
+
+    partner = np.full(n, -1)
+    for a, b in seeds:
+        if partner[a] >= 0 or partner[b] >= 0:
+            continue
+        partner[a], partner[b] = b, a
+        for step_a in (following, preceding):
+            step_b = min((following, preceding), key=lambda step: gap(step_a[a], step[b]))
+            x, y = step_a[a], step_b[b]
+            while partner[x] < 0 and partner[y] < 0 and gap(x, y) <= distance:
+                partner[x], partner[y] = y, x
+                x, y = step_a[x], step_b[y]
+    first = np.flatnonzero(np.arange(n) < partner)
+    if len(first) == 0:
+        return vertices, faces, 0
+    second = partner[first]
+    moved = vertices.copy()
+    moved[first] = (vertices[first] + vertices[second]) / 2
+    remap = np.arange(n)
+    remap[second] = first
+    return moved, remap[faces], len(first)
+
+
+def _seeds(
+    vertices: np.ndarray, labels: np.ndarray, candidates: np.ndarray, distance: float
+) -> tuple[list[tuple[int, int]], dict[tuple[int, int], np.ndarray]]:
+    """Candidate pairs for `stitch`, and the shift between each two parts that meet.
+
+    Each boundary vertex is paired with its nearest few on other parts within ``distance``.
+    Parts of a model that were moved apart keep the vertices of their seam in step, so each
+    two parts get the median of their pairs' offsets as their shift, and the pairs are sorted
+    by their distance once that shift is undone.
+    """
     points = vertices[candidates]
     k = min(8, len(candidates))
-    _, near = cKDTree(points).query(points, k=k, distance_upper_bound=distance)
-    other = (near < len(candidates)) & (
-        labels[candidates[np.minimum(near, len(candidates) - 1)]] != labels[candidates][:, None]
-    )
-    has = other.any(axis=1)
-    first = np.argmax(other, axis=1)
-    partner = np.where(has, near[np.arange(len(candidates)), first], -1)
-    mutual = has & (partner[np.maximum(partner, 0)] == np.arange(len(candidates)))
-    a = np.flatnonzero(mutual & (np.arange(len(candidates)) < partner))
-    if len(a) == 0:
-        return None
-    b = partner[a]
-    moved = vertices.copy()
-    middle = (points[a] + points[b]) / 2
-    moved[candidates[a]] = middle
-    moved[candidates[b]] = middle
-    return moved, len(a)
+    length, near = cKDTree(points).query(points, k=k, distance_upper_bound=distance)
+    rows = np.repeat(np.arange(len(candidates)), k)
+    near = near.ravel()
+    valid = near < len(candidates)
+    a, b = candidates[rows[valid]], candidates[near[valid]]
+    keep = (a < b) & (labels[a] != labels[b])
+    a, b = a[keep], b[keep]
+    shift: dict[tuple[int, int], np.ndarray] = {}
+    for pa, pb in set(zip(labels[a].tolist(), labels[b].tolist(), strict=True)):
+        mine = (labels[a] == pa) & (labels[b] == pb)
+        offset = np.median(vertices[b[mine]] - vertices[a[mine]], axis=0)
+        shift[(pa, pb)], shift[(pb, pa)] = offset, -offset
+    pairs = zip(labels[a].tolist(), labels[b].tolist(), strict=True)
+    offsets = np.array([shift[key] for key in pairs])
+    residual = np.linalg.norm(vertices[b] - offsets.reshape(-1, 3) - vertices[a], axis=1)
+    order = np.argsort(residual, kind="stable")
+    return list(zip(a[order].tolist(), b[order].tolist(), strict=True)), shift
 
 
 def drop_fragments(
@@ -397,10 +508,3 @@ def _parts(ends: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
     )
     count, labels = connected_components(graph, directed=False)
     return int(count), labels
-
-
-def _boundary_vertices(edges, n_vertices: int) -> np.ndarray:
-    """Vertices on an edge of one face."""
-    mask = np.zeros(n_vertices, dtype=bool)
-    mask[edges.ends[np.diff(edges.starts) == 1].ravel()] = True
-    return mask

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .evaluate import RetrievalReport
-from .render import plot_precision_recall, render_grid, retrieval_row
+from .figures import plot_precision_recall, render_grid, retrieval_row
+from .measures import RetrievalReport
 
 PAGE = "index.html"
 _RESULTS = 10

@@ -14,7 +14,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .cfhks import LENGTH as CFHKS_LENGTH
 from .cfhks import cfhks_vector
 from .conformal import ConformalFactor, conformal_factor
 from .errors import MeshError, SolverError
@@ -29,7 +28,7 @@ class Signature:
 
     Attributes
     ----------
-    histogram : (signature_length(params),) float64
+    vector : (signature_length(params),) float64
         The signature vector: for ``cf`` the histogram of phi, summing to 1; for another
         descriptor its vector (`signature_of`).
     phi : (n,) float64
@@ -49,7 +48,7 @@ class Signature:
         Hash of the file's bytes ("" for an in-memory mesh).
     """
 
-    histogram: np.ndarray
+    vector: np.ndarray
     phi: np.ndarray
     n_vertices: int
     n_faces: int
@@ -137,22 +136,6 @@ def histogram(values: np.ndarray, params: Params) -> np.ndarray:
     return np.bincount(index, minlength=params.bins) / len(values)
 
 
-def signature_length(params: Params) -> int:
-    """Length of the signature vectors that ``params`` make.
-
-    Parameters
-    ----------
-    params : Params
-        Signature parameters.
-
-    Returns
-    -------
-    length : int
-        ``params.bins`` for ``cf``; the descriptor's fixed length otherwise.
-    """
-    return params.bins if params.descriptor == "cf" else CFHKS_LENGTH
-
-
 def signature_of(cf: ConformalFactor, faces: np.ndarray, params: Params) -> np.ndarray:
     """The signature of a mesh whose conformal factor is known, for ``params.descriptor``.
 
@@ -183,7 +166,7 @@ def signature_of(cf: ConformalFactor, faces: np.ndarray, params: Params) -> np.n
         span = np.ptp(phi)
         phi = (phi - phi.min()) / span if span > 0 else np.zeros_like(phi)
     samples = sample_phi(
-        faces, cf.face_areas, phi, params.samples_per_face * len(faces), params.seed
+        faces, cf.operators.face_areas, phi, params.samples_per_face * len(faces), params.seed
     )
     return histogram(np.concatenate([samples, phi]), params)
 
@@ -222,14 +205,14 @@ def _repair_and_sign(mesh: Mesh, params: Params, solver: str) -> tuple[Mesh, Sig
     cf = conformal_factor(mesh, params.mollify, solver)
     hist = signature_of(cf, mesh.faces, params)
     repairs = mesh.repairs
-    if cf.mollified > 0:
-        repairs += (f"mollified degenerate triangles (edges +{cf.mollified:.3g})",)
+    if cf.operators.mollified > 0:
+        repairs += (f"mollified degenerate triangles (edges +{cf.operators.mollified:.3g})",)
     return mesh, Signature(
         hist,
         cf.phi,
         len(mesh.vertices),
         len(mesh.faces),
-        cf.n_components,
+        cf.operators.n_components,
         cf.curvature_error,
         repairs,
         mesh.route,

@@ -6,27 +6,22 @@ import numpy as np
 import pytest
 import trimesh
 from click.testing import CliRunner
-from conftest import disk, icosphere, open_cylinder
 
 from cfsig.cli import EXIT_SKIPPED, main
 from cfsig.mesh import read_mesh
 from cfsig.params import Params
 from cfsig.signature import compute_signature, signature_file
+from tests.helpers import disk, icosphere, off_text, open_cylinder
 
 
 def _compute(path, *extra):
     return CliRunner().invoke(main, ["compute", *extra, str(path)])
 
 
-def _off(v, f):
-    lines = ["OFF", f"{len(v)} {len(f)} 0", *(" ".join(map(repr, map(float, p))) for p in v)]
-    lines += [f"{len(face)} " + " ".join(map(str, face)) for face in f]
-    return "\n".join(lines) + "\n"
-
-
 BAD_FILES = {
     "empty.off": (b"", "empty file"),
     "garbage.off": (bytes(range(256)) * 4, "not an OFF file"),
+    "comment.off": (b"# only a comment\n", "not an OFF file"),  # found by tests/test_fuzz.py
     "truncated.off": (b"OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n", "truncated OFF"),
     "huge.off": (b"OFF\n1000000000 2000000000 0\n0 0 0\n", "truncated OFF"),
     "words.off": (b"OFF\n3 1 0\n0 0 zero\n1 0 0\n0 1 0\n3 0 1 2\n", "malformed OFF"),
@@ -63,7 +58,7 @@ def test_missing_and_unreadable(tmp_path):
 
 def test_json_output_stays_valid_with_errors(tmp_path):
     good, bad = tmp_path / "good.off", tmp_path / "bad.off"
-    good.write_text(_off(*icosphere(2)))
+    good.write_text(off_text(*icosphere(2)))
     bad.write_text("OFF\n3 1 0\n")
     result = CliRunner().invoke(main, ["compute", "--json", str(good), str(bad)])
     rows = json.loads(result.stdout)
@@ -93,7 +88,7 @@ def test_polygons_and_mixed_ply_are_triangulated(tmp_path):
     off = "\n".join(["OFF", "8 6 0", *verts, *quads])
     (tmp_path / "cube.off").write_text(off + "\n")
     sig = signature_file(tmp_path / "cube.off", Params())
-    assert np.isfinite(sig.histogram).all() and sig.n_faces == 12
+    assert np.isfinite(sig.vector).all() and sig.n_faces == 12
 
 
 def test_repairs_are_reported(tmp_path):
@@ -101,7 +96,7 @@ def test_repairs_are_reported(tmp_path):
     v = np.vstack([v, [[5.0, 5, 5]]])  # unreferenced
     f = np.vstack([f, f[:2], [[0, 0, 1]]])  # two duplicates and a face repeating a vertex
     path = tmp_path / "messy.off"
-    path.write_text(_off(v, f))
+    path.write_text(off_text(v, f))
     result = _compute(path, "--json")
     row = json.loads(result.stdout)[0]
     assert result.exit_code == 0
@@ -121,10 +116,10 @@ def test_zero_area_and_needle_triangles_are_mollified():
         vv = np.vstack([v, d_pos])
         ff = np.vstack([f[1:], [[a, d, c], [d, b, c], [a, b, d]]])
         sig = compute_signature(read_mesh_arrays(vv, ff), Params())
-        assert np.isfinite(sig.histogram).all() and np.isfinite(sig.phi).all(), name
+        assert np.isfinite(sig.vector).all() and np.isfinite(sig.phi).all(), name
         assert any("mollified" in r for r in sig.repairs), name
-        base = compute_signature(read_mesh_arrays(v, f), Params()).histogram
-        assert np.abs(sig.histogram - base).sum() < 0.05, name
+        base = compute_signature(read_mesh_arrays(v, f), Params()).vector
+        assert np.abs(sig.vector - base).sum() < 0.05, name
 
 
 def read_mesh_arrays(v, f):
@@ -136,14 +131,14 @@ def read_mesh_arrays(v, f):
 @pytest.mark.parametrize("make", [disk, open_cylinder], ids=["disk", "cylinder"])
 def test_open_boundaries(make):
     sig = compute_signature(read_mesh_arrays(*make()), Params())
-    assert np.isfinite(sig.histogram).all() and sig.histogram.sum() == pytest.approx(1)
+    assert np.isfinite(sig.vector).all() and sig.vector.sum() == pytest.approx(1)
     assert abs(sig.phi.mean()) < 1e-12
 
 
 def test_components_reported(tmp_path):
     v1, f1 = icosphere(1)
     path = tmp_path / "two.off"
-    path.write_text(_off(np.vstack([v1, v1 + 3]), np.vstack([f1, f1 + len(v1)])))
+    path.write_text(off_text(np.vstack([v1, v1 + 3]), np.vstack([f1, f1 + len(v1)])))
     assert "2 component(s)" in _compute(path).output
 
 
@@ -151,7 +146,7 @@ def test_evaluate_keeps_going_past_bad_files(tmp_path):
     for cls in ("a", "b"):
         (tmp_path / cls).mkdir()
         for i in range(2):
-            (tmp_path / cls / f"{i}.off").write_text(_off(*icosphere(1 + i)))
+            (tmp_path / cls / f"{i}.off").write_text(off_text(*icosphere(1 + i)))
     (tmp_path / "b" / "broken.off").write_text("OFF\n")
     result = CliRunner().invoke(main, ["evaluate", str(tmp_path), "-j", "1"])
     assert result.exit_code == EXIT_SKIPPED
@@ -159,10 +154,8 @@ def test_evaluate_keeps_going_past_bad_files(tmp_path):
     assert "Traceback" not in result.output
 
 
-def test_query_mesh_that_fails(tmp_path):
-    from test_index import _build
-
-    _build(tmp_path / "i.h5", 3)
+def test_query_mesh_that_fails(tmp_path, build_index):
+    build_index(tmp_path / "i.h5", 3)
     (tmp_path / "q.off").write_text("nonsense")
     result = CliRunner().invoke(main, ["query", str(tmp_path / "i.h5"), str(tmp_path / "q.off")])
     assert result.exit_code == 1

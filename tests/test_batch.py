@@ -9,8 +9,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import icosphere, torus
-from crashing import signature_or_crash
 
 import cfsig
 from cfsig import batch
@@ -20,14 +18,8 @@ from cfsig.errors import ClusterError
 from cfsig.index import IndexReader, IndexWriter
 from cfsig.params import Params
 from cfsig.signature import signature_file
-
-
-def _write_off(path: Path, v: np.ndarray, f: np.ndarray) -> Path:
-    lines = ["OFF", f"{len(v)} {len(f)} 0"]
-    lines += [" ".join(map(repr, map(float, p))) for p in v]
-    lines += ["3 " + " ".join(map(str, face)) for face in f]
-    path.write_text("\n".join(lines) + "\n")
-    return path
+from tests.crashing import signature_or_crash
+from tests.helpers import icosphere, torus, write_off
 
 
 @pytest.fixture
@@ -43,7 +35,7 @@ def meshes(tmp_path):
     }
     for name, (verts, faces) in shapes.items():
         (tmp_path / name).parent.mkdir(exist_ok=True)
-        _write_off(tmp_path / name, verts, faces)
+        write_off(tmp_path / name, verts, faces)
     (tmp_path / "ring" / "broken.off").write_text("OFF\n3 1 0\n0 0 0\n")
     return tmp_path
 
@@ -62,8 +54,8 @@ def test_a_crashing_worker_costs_only_its_file(meshes):
     assert outcomes["broken.off"].signature is None and "truncated" in outcomes["broken.off"].error
     for path in paths:
         if path.name not in ("crash.off", "broken.off"):
-            expected = signature_file(path, Params()).histogram
-            assert np.array_equal(outcomes[path.name].signature.histogram, expected)
+            expected = signature_file(path, Params()).vector
+            assert np.array_equal(outcomes[path.name].signature.vector, expected)
 
 
 def test_index_meshes_adds_new_and_changed_files_only(meshes, tmp_path):
@@ -84,7 +76,7 @@ def test_index_meshes_adds_new_and_changed_files_only(meshes, tmp_path):
     assert sorted(names) == ["ring/d.off", "ring/e.off"] + [f"round/{c}.off" for c in "abc"]
     assert sorted(set(labels)) == ["ring", "round"]
     assert entry.path == str((meshes / "ring" / "d.off").resolve())
-    _write_off(meshes / "round" / "a.off", *torus(nu=20, nv=8))  # changed contents
+    write_off(meshes / "round" / "a.off", *torus(nu=20, nv=8))  # changed contents
     with IndexWriter(index, Params()) as writer:
         added, failures = index_meshes(writer, [meshes], jobs=1, progress=progress)
     assert added == 1 and len(failures) == 1 and seen == [6, 2]  # a.off and broken.off again
@@ -92,7 +84,7 @@ def test_index_meshes_adds_new_and_changed_files_only(meshes, tmp_path):
         assert len(reader) == 5
         row = list(reader.column("names")).index("round/a.off")
         stored = reader.signatures[row]
-    expected = signature_file(meshes / "round" / "a.off", Params()).histogram
+    expected = signature_file(meshes / "round" / "a.off", Params()).vector
     assert np.allclose(stored, expected, atol=1e-6)
 
 
@@ -133,6 +125,16 @@ def _stop(procs: list[subprocess.Popen]) -> None:
             proc.wait()
 
 
+def _scheduler_address(info: Path, deadline: float) -> str:
+    """The address in the scheduler's file, once the scheduler has written the file whole."""
+    while time.monotonic() < deadline:
+        try:
+            return json.loads(info.read_text())["address"]
+        except (OSError, ValueError, KeyError):  # not there yet, or still being written
+            time.sleep(0.05)
+    raise TimeoutError(f"the Dask scheduler wrote no address to {info}")
+
+
 @pytest.fixture
 def dask_cluster(tmp_path):
     """A Dask scheduler and two one-thread workers, separate processes, all on loopback."""
@@ -146,10 +148,7 @@ def dask_cluster(tmp_path):
                      "--scheduler-file", str(info)], env)]  # fmt: skip
     try:
         deadline = time.monotonic() + 60
-        while not info.exists() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        time.sleep(0.2)  # the file is written whole, but give the writer a moment
-        address = json.loads(info.read_text())["address"]
+        address = _scheduler_address(info, deadline)
         worker = ["distributed.cli.dask_worker", address, "--nthreads", "1", "--nanny-port", "0"]
         procs += [_start([*worker, "--worker-port", "0", *local], env) for _ in range(2)]
         from distributed import Client
@@ -169,7 +168,7 @@ def test_dask_cluster_gives_the_local_results(meshes, dask_cluster):
     assert remote["broken.off"].signature is None and "truncated" in remote["broken.off"].error
     for name, outcome in local.items():
         if outcome.signature is not None:
-            assert np.array_equal(remote[name].signature.histogram, outcome.signature.histogram)
+            assert np.array_equal(remote[name].signature.vector, outcome.signature.vector)
             assert np.array_equal(remote[name].signature.phi, outcome.signature.phi)
 
     runner = CliRunner()

@@ -1,4 +1,4 @@
-"""Tests for cfsig.evaluate: PSB retrieval measures, the .cla reader and collections."""
+"""Tests for cfsig.measures, cfsig.cla and cfsig.evaluate: PSB measures, .cla files, collections."""
 
 import json
 import math
@@ -6,24 +6,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import icosphere, torus
-from test_index import _build
 
+from cfsig.cla import read_cla
 from cfsig.demo import write_off
 from cfsig.errors import IndexFileError, MeshError
 from cfsig.evaluate import (
-    MEASURES,
     Collection,
-    RetrievalReport,
     collection_from_index,
     compute_collection,
     evaluate_collections,
-    evaluate_distances,
-    read_cla,
 )
 from cfsig.index import IndexReader
+from cfsig.measures import MEASURES, RetrievalReport, evaluate_distances
 from cfsig.params import Params
 from cfsig.signature import signature_file
+from tests.helpers import icosphere, torus
 
 SHREC07_CLA = Path("/work/shared/data/shrec07.cla")
 
@@ -279,7 +276,7 @@ def test_compute_collection_in_file_order_with_folder_labels(folder, computed):
     assert collection.labels == ("shapes", "ring", "ring", "round", "round", "round")
     assert collection.paths == tuple(str(folder / name) for name in names)
     assert collection.signatures.shape == (6, Params().bins)
-    expected = signature_file(folder / "round" / "b.off", Params(), "auto").histogram
+    expected = signature_file(folder / "round" / "b.off", Params(), "auto").vector
     assert np.array_equal(collection.signatures[4], expected)
     assert collection.seconds.shape == (6,) and (collection.seconds > 0).all()
     assert len(failures) == 1 and failures[0].startswith(f"{folder / 'ring' / 'broken.off'}: ")
@@ -307,8 +304,8 @@ def test_compute_collection_empty_folder(tmp_path):
         compute_collection(tmp_path, Params())
 
 
-def test_collection_from_index(tmp_path):
-    hists = _build(tmp_path / "i.h5", 5, Params(descriptor="cf"))
+def test_collection_from_index(tmp_path, build_index):
+    hists = build_index(tmp_path / "i.h5", 5, Params(descriptor="cf"))
     descriptor, collection = collection_from_index(tmp_path / "i.h5")
     assert descriptor == "cf" and collection.seconds is None
     assert collection.names == tuple(f"c{i % 3}/{i}.off" for i in range(5))

@@ -2,9 +2,9 @@ import igl
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from conftest import disk, icosphere, open_cylinder, torus
 
 from cfsig import geometry
+from tests.helpers import disk, icosphere, open_cylinder, torus
 
 
 def _curvature(v, f):

@@ -4,21 +4,10 @@ import pytest
 
 from cfsig.errors import IndexFileError
 from cfsig.index import Entry, IndexReader, IndexWriter
+from cfsig.nearest import l1_distances, nearest, search
 from cfsig.params import Params
-from cfsig.search import l1_distances, nearest, search
-from cfsig.signature import Signature
-
-
-def _sig(seed, bins=200):
-    h = np.random.default_rng(seed).random(bins)
-    return Signature(h / h.sum(), np.zeros(3), 3, 1, 1, 0.0, (), 0.0, f"{seed:064d}")
-
-
-def _build(path, n=10, params=None):
-    with IndexWriter(path, params or Params()) as w:
-        for i in range(n):
-            w.add(Entry(f"c{i % 3}/{i}.off", f"c{i % 3}", f"/data/c{i % 3}/{i}.off"), _sig(i))
-    return [_sig(i).histogram for i in range(n)]
+from tests.helpers import build_index as _build
+from tests.helpers import random_signature as _sig
 
 
 def test_round_trip(tmp_path):
@@ -41,7 +30,7 @@ def test_update_replaces_by_name(tmp_path):
         w.add(Entry("new.off", "z", "/y"), _sig(5))
     with IndexReader(path) as r:
         assert len(r) == 5
-        assert np.allclose(r.signatures[1], _sig(99).histogram, atol=1e-7)
+        assert np.allclose(r.signatures[1], _sig(99).vector, atol=1e-7)
         assert r.column("names")[4] == "new.off"
 
 
@@ -78,7 +67,7 @@ def test_nearest_matches_brute_force(tmp_path, monkeypatch):
 
     monkeypatch.setattr(cfsig.index, "_CHUNK_ROWS", 7)  # several blocks
     hists = np.array(_build(tmp_path / "i.h5", 30))
-    queries = np.array([_sig(100).histogram, _sig(101).histogram])
+    queries = np.array([_sig(100).vector, _sig(101).vector])
     with IndexReader(tmp_path / "i.h5") as r:
         rows, dist = nearest(r, queries, 5)
         hits = search(r, queries[:1], 3)

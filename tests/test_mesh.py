@@ -1,22 +1,15 @@
 import numpy as np
 import pytest
 import trimesh
-from conftest import icosphere
 
 from cfsig.errors import MeshError
 from cfsig.mesh import clean_mesh, find_meshes, read_mesh
-
-
-def _write_off(path, v, f):
-    lines = ["OFF", f"{len(v)} {len(f)} 0"]
-    lines += [" ".join(map(repr, map(float, p))) for p in v]
-    lines += [f"{len(face)} " + " ".join(map(str, face)) for face in f]
-    path.write_text("\n".join(lines) + "\n")
+from tests.helpers import icosphere, write_off
 
 
 def test_off_round_trip(tmp_path):
     v, f = icosphere(1)
-    _write_off(tmp_path / "s.off", v, f)
+    write_off(tmp_path / "s.off", v, f)
     mesh = read_mesh(tmp_path / "s.off")
     assert np.array_equal(mesh.vertices, v) and np.array_equal(mesh.faces, f)
     assert mesh.repairs == ()

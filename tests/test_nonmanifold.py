@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-from conftest import disk, icosphere, open_cylinder, torus
 
 from cfsig import geometry
 from cfsig.conformal import conformal_factor
@@ -10,16 +9,14 @@ from cfsig.demo import capsule, limbed_body
 from cfsig.mesh import clean_mesh, split_nonmanifold
 from cfsig.params import Params
 from cfsig.signature import compute_signature
+from tests.helpers import disk, icosphere, open_cylinder, signature_vector, torus
+from tests.helpers import l1 as _l1
 
 AS_READ = Params(repair="off")  # each part solved as read: what the split itself gives
 
 
 def _sig(v, f):
-    return compute_signature(clean_mesh(v, f), AS_READ).histogram
-
-
-def _l1(a, b):
-    return float(np.abs(a - b).sum())
+    return signature_vector(v, f, AS_READ)
 
 
 def test_manifold_mesh_is_untouched():
@@ -65,19 +62,19 @@ def test_two_parts_touching_at_a_vertex_are_separated():
     assert any("non-manifold" in r for r in mesh.repairs)
     assert len(mesh.vertices) == len(glued_v) + 1
     assert geometry.components(geometry.edge_graph(mesh.faces, len(mesh.vertices)))[0] == 2
-    assert _l1(compute_signature(mesh, AS_READ).histogram, _sig(*apart)) < 1e-12
+    assert _l1(compute_signature(mesh, AS_READ).vector, _sig(*apart)) < 1e-12
 
 
 @pytest.fixture(scope="module")
-def body():
-    v, f = limbed_body(3, 0)
-    sig = _sig(v, f)
-    other = min(_l1(sig, _sig(*limbed_body(2, 0))), _l1(sig, _sig(*capsule())))
-    return v, f, sig, other
+def body_signature(body):
+    """The body's signature and its L1 distance to the nearer of two other shapes."""
+    sig = _sig(*body)
+    return sig, min(_l1(sig, _sig(*limbed_body(2, 0))), _l1(sig, _sig(*capsule())))
 
 
-def test_fin_on_an_edge(body):
-    v, f, sig, other = body
+def test_fin_on_an_edge(body, body_signature):
+    v, f = body
+    sig, other = body_signature
     a, b, c = f[100]
     normal = np.cross(v[b] - v[a], v[c] - v[a])
     tip = (v[a] + v[b]) / 2 + normal / np.linalg.norm(normal) * np.linalg.norm(v[b] - v[a])
@@ -88,13 +85,13 @@ def test_fin_on_an_edge(body):
     mesh = clean_mesh(fin_v, fin_f)
     _, counts = geometry.edge_face_counts(mesh.faces, len(mesh.vertices))
     assert counts.max() == 2
-    fin_sig = compute_signature(mesh, Params()).histogram
+    fin_sig = compute_signature(mesh, Params()).vector
     assert np.isfinite(fin_sig).all()
     assert _l1(fin_sig, sig) < 0.1 * other
 
 
 def test_two_bodies_touching_at_a_vertex(body):
-    v, f, sig, other = body
+    v, f = body
     cv, cf = capsule()
     right, left = np.argmax(v[:, 0]), np.argmin(cv[:, 0])
     touching_v = np.vstack([v, cv + (v[right] - cv[left])])
@@ -105,7 +102,7 @@ def test_two_bodies_touching_at_a_vertex(body):
     assert any("merged 1 coincident" in r for r in touching.repairs)
     assert any("non-manifold" in r for r in touching.repairs)
     apart_sig = _sig(apart_v, faces)
-    assert _l1(compute_signature(touching, AS_READ).histogram, apart_sig) < 1e-12
+    assert _l1(compute_signature(touching, AS_READ).vector, apart_sig) < 1e-12
 
 
 def test_clean_mesh_keeps_the_edges_of_its_check_unless_it_splits():

@@ -6,14 +6,14 @@ import sys
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import icosphere, open_cylinder, random_rotation, torus
 
-from cfsig import render
+from cfsig import figures, raster
 from cfsig.cli import main
 from cfsig.errors import MissingDependencyError
-from cfsig.evaluate import evaluate_distances
+from cfsig.measures import evaluate_distances
 from cfsig.mesh import Mesh, clean_mesh, read_mesh
 from cfsig.report import write_report
+from tests.helpers import icosphere, open_cylinder, random_rotation, torus, write_off
 
 matplotlib = pytest.importorskip("matplotlib")
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -42,40 +42,33 @@ def _ellipsoid(stretch=(2.5, 1.0, 0.6), levels=2) -> Mesh:
     return clean_mesh(v * np.array(stretch), f)
 
 
-def _write_off(path, mesh: Mesh):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    lines = ["OFF", f"{len(mesh.vertices)} {len(mesh.faces)} 0"]
-    lines += [" ".join(map(repr, v)) for v in mesh.vertices.tolist()]
-    lines += ["3 " + " ".join(map(str, f)) for f in mesh.faces.tolist()]
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
 @pytest.fixture
 def collection(tmp_path):
     """Two classes of two meshes each, as OFF files in class folders."""
     root = tmp_path / "shapes"
     for i, s in enumerate((2.5, 2.8)):
-        _write_off(root / "long" / f"{i}.off", _ellipsoid((s, 1.0, 0.6)))
+        mesh = _ellipsoid((s, 1.0, 0.6))
+        write_off(root / "long" / f"{i}.off", mesh.vertices, mesh.faces)
     for i, r in enumerate((0.3, 0.4)):
-        _write_off(root / "ring" / f"{i}.off", clean_mesh(*torus(r=r, nu=24, nv=10)))
+        mesh = clean_mesh(*torus(r=r, nu=24, nv=10))
+        write_off(root / "ring" / f"{i}.off", mesh.vertices, mesh.faces)
     return root
 
 
 def test_unit_interval_and_colours_follow_phi():
     phi = np.array([3.0, -1.0, 7.0, 0.5])
-    assert np.allclose(render.unit_interval(phi), [0.5, 0.0, 1.0, 0.1875])
-    colors = render.phi_colors(phi)
-    cmap = matplotlib.colormaps[render.CMAP]
+    assert np.allclose(raster.unit_interval(phi), [0.5, 0.0, 1.0, 0.1875])
+    colors = figures.phi_colors(phi)
+    cmap = matplotlib.colormaps[raster.CMAP]
     assert colors.shape == (4, 4) and colors.dtype == np.uint8
     assert np.array_equal(colors[2], np.round(np.array(cmap(1.0)) * 255))
     assert np.array_equal(colors[1], np.round(np.array(cmap(0.0)) * 255))
-    assert np.array_equal(render.phi_colors(np.ones(3))[0], np.round(np.array(cmap(0.5)) * 255))
+    assert np.array_equal(figures.phi_colors(np.ones(3))[0], np.round(np.array(cmap(0.5)) * 255))
 
 
 def test_default_view_is_a_rotation_showing_the_long_axis_upright():
     mesh = _ellipsoid((0.5, 1.0, 3.0))  # longest along z, thinnest along x
-    view = render.default_view(mesh.vertices)
+    view = raster.default_view(mesh.vertices)
     assert np.allclose(view @ view.T, np.eye(3)) and np.isclose(np.linalg.det(view), 1.0)
     projected = mesh.vertices @ view.T
     extent = np.ptp(projected, axis=0)
@@ -86,16 +79,16 @@ def test_default_view_is_a_rotation_showing_the_long_axis_upright():
 def test_rendered_colour_at_the_largest_phi_is_the_top_colour():
     v, f = icosphere(3)
     mesh = clean_mesh(v, f)
-    phi = v @ render.LIGHT  # largest where the surface faces the light: full brightness there
-    image = render.shade_mesh(mesh, render.unit_interval(phi), view=np.eye(3), size=(200, 200))
+    phi = v @ raster.LIGHT  # largest where the surface faces the light: full brightness there
+    image = raster.shade_mesh(mesh, raster.unit_interval(phi), view=np.eye(3), size=(200, 200))
     assert image.shape == (200, 200, 4) and image.dtype == np.float32
-    x, y, _ = render.screen_coordinates(v, np.eye(3), (200, 200))[np.argmax(phi)]
+    x, y, _ = raster.screen_coordinates(v, np.eye(3), (200, 200))[np.argmax(phi)]
     pixel = image[int(y), int(x)]
-    top = np.array(matplotlib.colormaps[render.CMAP](1.0)[:3])
+    top = np.array(matplotlib.colormaps[raster.CMAP](1.0)[:3])
     assert pixel[3] == 1.0
     assert np.abs(pixel[:3] - top).max() < 0.03
     middle = np.argmin(np.abs(phi) - v[:, 2])  # mid-range phi, facing the viewer
-    x, y, _ = render.screen_coordinates(v, np.eye(3), (200, 200))[middle]
+    x, y, _ = raster.screen_coordinates(v, np.eye(3), (200, 200))[middle]
     assert np.abs(image[int(y), int(x), :3] - top).max() > 0.3  # elsewhere another colour
     assert image[0, 0, 3] == 0 and image[100, 100, 3] == 1  # background clear, sphere opaque
 
@@ -105,11 +98,11 @@ def test_culling_back_faces_changes_no_pixel(shape):
     v, f = icosphere(2) if shape == "sphere" else torus(nu=24, nv=10)
     mesh = clean_mesh(v, f[:, ::-1] if shape == "flipped torus" else f)
     view = random_rotation(3)
-    visible = render._visible_faces(mesh, view[2])
+    visible = raster._visible_faces(mesh, view[2])
     assert 0.3 * len(mesh.faces) < len(visible) < 0.7 * len(mesh.faces)
-    points = render.screen_coordinates(mesh.vertices, view, (120, 120))
-    all_faces, _ = render._rasterize(points, mesh.faces, 120, 120)
-    culled, _ = render._rasterize(points, visible, 120, 120)
+    points = raster.screen_coordinates(mesh.vertices, view, (120, 120))
+    all_faces, _ = raster._rasterize(points, mesh.faces, 120, 120)
+    culled, _ = raster._rasterize(points, visible, 120, 120)
     assert np.array_equal(culled >= 0, all_faces >= 0)
     drawn = culled >= 0
     assert np.array_equal(visible[culled[drawn]], mesh.faces[all_faces[drawn]])
@@ -117,14 +110,14 @@ def test_culling_back_faces_changes_no_pixel(shape):
 
 def test_open_surfaces_are_not_culled():
     mesh = clean_mesh(*open_cylinder())
-    assert len(render._visible_faces(mesh, np.array([0.0, 0.0, 1.0]))) == len(mesh.faces)
+    assert len(raster._visible_faces(mesh, np.array([0.0, 0.0, 1.0]))) == len(mesh.faces)
 
 
 def test_shading_is_lit_from_the_light():
     v, f = icosphere(3)
-    image = render.shade_mesh(clean_mesh(v, f), view=np.eye(3), size=(100, 100))
-    points = render.screen_coordinates(v, np.eye(3), (100, 100))
-    lit, dark = (points[np.argmax(s * v @ render.LIGHT)] for s in (1, -1))
+    image = raster.shade_mesh(clean_mesh(v, f), view=np.eye(3), size=(100, 100))
+    points = raster.screen_coordinates(v, np.eye(3), (100, 100))
+    lit, dark = (points[np.argmax(s * v @ raster.LIGHT)] for s in (1, -1))
     brightness = [image[int(p[1]), int(p[0]), :3].mean() for p in (lit, dark)]
     assert brightness[0] > brightness[1] + 0.3
 
@@ -132,8 +125,8 @@ def test_shading_is_lit_from_the_light():
 def test_render_phi_png_size_content_and_determinism(tmp_path):
     mesh = _ellipsoid()
     items = [(mesh, mesh.vertices[:, 0], "a"), (mesh, -mesh.vertices[:, 1], "b")]
-    render.render_phi(items, tmp_path / "a.png", panel=200)
-    render.render_phi(items, tmp_path / "b.png", panel=200)
+    figures.render_phi(items, tmp_path / "a.png", panel=200)
+    figures.render_phi(items, tmp_path / "b.png", panel=200)
     _assert_picture(tmp_path / "a.png", (2 * 200 + 110, 200 + 40))
     assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
     assert b"Software" not in (tmp_path / "a.png").read_bytes()
@@ -143,13 +136,13 @@ def test_write_ply_round_trips_colours_and_phi(tmp_path):
     trimesh = pytest.importorskip("trimesh")
     mesh = _ellipsoid()
     phi = mesh.vertices[:, 0] ** 2
-    render.write_ply(mesh, phi, tmp_path / "m.ply")
+    figures.write_ply(mesh, phi, tmp_path / "m.ply")
     loaded = trimesh.load(tmp_path / "m.ply", process=False)
     assert np.allclose(loaded.vertices, mesh.vertices, atol=1e-6)
     assert np.array_equal(loaded.faces, mesh.faces)
     colors = np.asarray(loaded.visual.vertex_colors)
-    assert np.array_equal(colors, render.phi_colors(phi))
-    top = np.round(np.array(matplotlib.colormaps[render.CMAP](1.0)) * 255)
+    assert np.array_equal(colors, figures.phi_colors(phi))
+    top = np.round(np.array(matplotlib.colormaps[raster.CMAP](1.0)) * 255)
     assert np.array_equal(colors[np.argmax(phi)], top)
     quality = loaded.metadata["_ply_raw"]["vertex"]["data"]["quality"]
     assert np.allclose(quality.ravel(), phi, rtol=1e-6)
@@ -159,7 +152,7 @@ def test_histogram_and_precision_recall_plots(tmp_path):
     rng = np.random.default_rng(0)
     hists = rng.random((3, 200)) * (np.arange(200) > 90) * (np.arange(200) < 130)
     hists /= hists.sum(axis=1, keepdims=True)
-    render.plot_histograms(
+    figures.plot_histograms(
         hists, ["a/1.off", "a/2.off", "b/1.off"], (-99.5, 100.5), tmp_path / "h.png"
     )
     _assert_picture(tmp_path / "h.png", (800, 450))
@@ -168,39 +161,40 @@ def test_histogram_and_precision_recall_plots(tmp_path):
     assert set(report.class_precision_recall) == {"x", "y", "z"}
     curves = np.array(list(report.class_precision_recall.values()))
     assert np.allclose(curves.mean(axis=0), report.precision_recall[:, 1])  # equal classes
-    render.plot_precision_recall(
+    figures.plot_precision_recall(
         report.class_precision_recall, report.precision_recall, tmp_path / "pr.png"
     )
     _assert_picture(tmp_path / "pr.png", (4 * 260, 230))
 
 
 def test_grid_frames_results_and_marks_missing_files(tmp_path):
-    a = _write_off(tmp_path / "long" / "a.off", _ellipsoid())
-    b = _write_off(tmp_path / "ring" / "b.off", clean_mesh(*torus(nu=24, nv=10)))
+    long, ring = _ellipsoid(), clean_mesh(*torus(nu=24, nv=10))
+    a = write_off(tmp_path / "long" / "a.off", long.vertices, long.faces)
+    b = write_off(tmp_path / "ring" / "b.off", ring.vertices, ring.faces)
     gone = tmp_path / "long" / "gone.off"
-    row = render.retrieval_row(
+    row = figures.retrieval_row(
         (str(a), "long/a.off", "long"),
         [(str(a), "a", "long", 0.0), (str(b), "b", "ring", 0.5), (str(gone), "g", "long", 0.7)],
     )
     assert [t.role for t in row] == ["query", "right", "wrong", "right"]
     assert row[2].caption == "2: 0.5000\nb"
-    problems = render.render_grid([row[:2], row[2:]], tmp_path / "g.png", tile=80)
+    problems = figures.render_grid([row[:2], row[2:]], tmp_path / "g.png", tile=80)
     assert problems == [f"{gone}: {MISSING}"]
     size, pixels = _png(tmp_path / "g.png")
     assert size == (2 * 80, 2 * (80 + 34)) and pixels[..., :3].std() > 0.05
-    green, orange = (np.array(render._FRAMES[k]) for k in ("right", "wrong"))
+    green, orange = (np.array(figures._FRAMES[k]) for k in ("right", "wrong"))
     assert np.abs(pixels[2, 80 + 2, :3] - green).max() < 0.02  # frame of result 1
     assert np.abs(pixels[114 + 2, 2, :3] - orange).max() < 0.02  # frame of result 2
-    unlabeled = render.retrieval_row((str(a), "a", None), [(str(b), "b", "ring", 0.5)])
+    unlabeled = figures.retrieval_row((str(a), "a", None), [(str(b), "b", "ring", 0.5)])
     assert unlabeled[1].role == "result"
-    render.render_grid([row[:2], row[2:]], tmp_path / "again.png", tile=80)
+    figures.render_grid([row[:2], row[2:]], tmp_path / "again.png", tile=80)
     assert (tmp_path / "g.png").read_bytes() == (tmp_path / "again.png").read_bytes()
 
 
 def test_grid_marks_unreadable_files(tmp_path):
     bad = tmp_path / "bad.off"
     bad.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n")
-    problems = render.render_grid([[render.Thumb(str(bad), "bad")]], tmp_path / "g.png", tile=80)
+    problems = figures.render_grid([[figures.Thumb(str(bad), "bad")]], tmp_path / "g.png", tile=80)
     assert len(problems) == 1 and problems[0].startswith(f"{bad}: unreadable (")
     _assert_picture(tmp_path / "g.png", (80, 80 + 34))
 
@@ -226,7 +220,7 @@ def test_missing_matplotlib_is_a_typed_error(monkeypatch, tmp_path):
     for name in ("matplotlib", "matplotlib.figure", "matplotlib.backends.backend_agg"):
         monkeypatch.setitem(sys.modules, name, None)
     with pytest.raises(MissingDependencyError, match=r"pip install 'cfsig\[plots\]'"):
-        render.plot_histograms([np.ones(4) / 4], ["a"], (0, 1), tmp_path / "h.png")
+        figures.plot_histograms([np.ones(4) / 4], ["a"], (0, 1), tmp_path / "h.png")
 
 
 def test_cli_without_matplotlib_says_how_to_install(monkeypatch, tmp_path, collection):

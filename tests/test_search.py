@@ -6,13 +6,13 @@ import pytest
 
 import cfsig.index
 import cfsig.l1
-import cfsig.search
+import cfsig.nearest
 from cfsig.blocks import plan_blocks, read_block
 from cfsig.errors import IndexFileError
 from cfsig.index import Entry, IndexReader, IndexWriter
 from cfsig.l1 import choose_kernel, fast_kernel, l1_numpy
+from cfsig.nearest import nearest, search
 from cfsig.params import Params
-from cfsig.search import nearest, search
 from cfsig.signature import Signature
 
 KERNELS = ["numpy", "faiss"]
@@ -104,7 +104,7 @@ def test_ties_broken_by_row_whatever_the_block_order(tmp_path, monkeypatch, kern
     for row in (3, 10, 17, 40, 41):  # in four different chunks of 7 rows
         hists[row] = twin
     _build(tmp_path / "i.h5", hists, 7, monkeypatch)
-    monkeypatch.setattr(cfsig.search, "_threads", lambda: threads)
+    monkeypatch.setattr(cfsig.nearest, "_threads", lambda: threads)
     with IndexReader(tmp_path / "i.h5") as r:
         rows, dist = nearest(r, np.stack([twin, hists[0]]), 8)
     assert list(rows[0, :6]) == [3, 10, 17, 20, 40, 41]
@@ -117,7 +117,7 @@ def test_ties_broken_by_row_whatever_the_block_order(tmp_path, monkeypatch, kern
 def test_many_queries_in_small_groups(tmp_path, monkeypatch, kernel):
     hists, queries = _histograms(40, 6), _histograms(30, 7)
     _build(tmp_path / "i.h5", hists, 16, monkeypatch)
-    monkeypatch.setattr(cfsig.search, "_OUT_CELLS", 40)  # 2 queries per kernel call
+    monkeypatch.setattr(cfsig.nearest, "_OUT_CELLS", 40)  # 2 queries per kernel call
     with IndexReader(tmp_path / "i.h5") as r:
         rows, dist = nearest(r, queries, 5)
     want_rows, want_dist = _brute_nearest(queries, hists, 5)
@@ -150,7 +150,7 @@ def test_every_layout_gives_the_same_result(tmp_path, monkeypatch, layout):
     _build(path, hists, 7, monkeypatch)
     if LAYOUTS[layout] is not None:
         _relayout(path, **LAYOUTS[layout])
-    monkeypatch.setattr(cfsig.search, "_BLOCK_ROWS", 10)
+    monkeypatch.setattr(cfsig.nearest, "_BLOCK_ROWS", 10)
     with IndexReader(path) as r:
         blocks = plan_blocks(r.signatures, 10)
         buffer = np.empty((max(b.stop - b.start for b in blocks), 200), np.float32)

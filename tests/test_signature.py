@@ -1,26 +1,15 @@
 import igl
 import numpy as np
 import pytest
-from conftest import random_rotation
 
 from cfsig import geometry
 from cfsig.demo import limbed_body
 from cfsig.mesh import clean_mesh
 from cfsig.params import Params
 from cfsig.signature import compute_signature, histogram, sample_phi
-
-
-def _sig(v, f, params=None):
-    return compute_signature(clean_mesh(v, f), params or Params()).histogram
-
-
-def _l1(a, b):
-    return float(np.abs(a - b).sum())
-
-
-@pytest.fixture(scope="module")
-def body():
-    return limbed_body(3, 0)
+from tests.helpers import l1 as _l1
+from tests.helpers import random_rotation
+from tests.helpers import signature_vector as _sig
 
 
 @pytest.fixture(scope="module")
@@ -91,8 +80,8 @@ def test_noise_keeps_signature_close(body, reference):
 def test_normalized_variant(body):
     params = Params(normalize=True)
     cf = compute_signature(clean_mesh(*body), params)
-    assert cf.histogram.sum() == pytest.approx(1.0)
-    assert cf.histogram[0] > 0 and cf.histogram[-1] > 0  # min and max phi land in the end bins
+    assert cf.vector.sum() == pytest.approx(1.0)
+    assert cf.vector[0] > 0 and cf.vector[-1] > 0  # min and max phi land in the end bins
 
 
 def test_samples_uniform_inside_a_triangle():

@@ -1,4 +1,4 @@
-"""Search: rank indexed signatures by L1 distance to query signatures (paper section 2.3).
+"""Nearest neighbours: rank indexed signatures by L1 distance to query signatures (paper 2.3).
 
 Every descriptor's vector is built so that its L1 distance is the descriptor's distance
 (`signature.signature_of`), so the search is the same for all.

@@ -1,0 +1,135 @@
+"""Helpers of the tests: meshes they generate, OFF files, small indexes. No external data."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from cfsig.index import Entry, IndexWriter
+from cfsig.mesh import clean_mesh
+from cfsig.params import Params
+from cfsig.signature import Signature, compute_signature
+
+
+def icosphere(levels: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """A unit icosphere, subdivided ``levels`` times (chi = 2)."""
+    import igl
+
+    t = (1 + 5**0.5) / 2
+    v = np.array(
+        [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
+         [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float,
+    )  # fmt: skip
+    f = np.array(
+        [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+         [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
+         [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]],
+    )  # fmt: skip
+    for _ in range(levels):
+        v, f = igl.upsample(v, f)
+    return v / np.linalg.norm(v, axis=1, keepdims=True), np.asarray(f, dtype=np.int64)
+
+
+def grid_surface(nu: int, nv: int, closed_u: bool, closed_v: bool, point) -> tuple:
+    """Triangulate a (u, v) grid mapped by ``point(u, v) -> (..., 3)``; u, v in [0, 1)."""
+    us = np.arange(nu) / nu if closed_u else np.linspace(0, 1, nu)
+    vs = np.arange(nv) / nv if closed_v else np.linspace(0, 1, nv)
+    uu, vv = np.meshgrid(us, vs, indexing="ij")
+    vertices = point(uu.ravel(), vv.ravel())
+    idx = np.arange(nu * nv).reshape(nu, nv)
+    i_end, j_end = (nu if closed_u else nu - 1), (nv if closed_v else nv - 1)
+    faces = []
+    for i in range(i_end):
+        for j in range(j_end):
+            a, b = idx[i, j], idx[(i + 1) % nu, j]
+            c, d = idx[(i + 1) % nu, (j + 1) % nv], idx[i, (j + 1) % nv]
+            faces += [[a, b, c], [a, c, d]]
+    return vertices, np.array(faces, dtype=np.int64)
+
+
+def torus(R: float = 1.0, r: float = 0.35, nu: int = 48, nv: int = 16) -> tuple:
+    """A torus (chi = 0)."""
+
+    def point(u, v):
+        a, b = 2 * np.pi * u, 2 * np.pi * v
+        return np.column_stack(
+            [(R + r * np.cos(b)) * np.cos(a), (R + r * np.cos(b)) * np.sin(a), r * np.sin(b)]
+        )
+
+    return grid_surface(nu, nv, True, True, point)
+
+
+def open_cylinder(n_around: int = 32, n_along: int = 12) -> tuple:
+    """An open cylinder with two boundary loops (chi = 0)."""
+
+    def point(u, v):
+        return np.column_stack([np.cos(2 * np.pi * u), np.sin(2 * np.pi * u), 2 * v])
+
+    return grid_surface(n_around, n_along, True, False, point)
+
+
+def disk(n_around: int = 32, n_rings: int = 8) -> tuple:
+    """A flat disk with one boundary loop (chi = 1): a centre vertex and rings."""
+    vertices = [[0.0, 0.0, 0.0]]
+    faces = []
+    for ring in range(1, n_rings + 1):
+        angles = 2 * np.pi * np.arange(n_around) / n_around + 0.1 * ring
+        vertices += [[ring * np.cos(a), ring * np.sin(a), 0.0] for a in angles]
+    for k in range(n_around):
+        faces.append([0, 1 + k, 1 + (k + 1) % n_around])
+    for ring in range(1, n_rings):
+        inner, outer = 1 + (ring - 1) * n_around, 1 + ring * n_around
+        for k in range(n_around):
+            k1 = (k + 1) % n_around
+            faces += [[inner + k, outer + k, outer + k1], [inner + k, outer + k1, inner + k1]]
+    return np.array(vertices), np.array(faces, dtype=np.int64)
+
+
+def random_rotation(seed: int) -> np.ndarray:
+    """A random proper rotation matrix."""
+    q, r = np.linalg.qr(np.random.default_rng(seed).standard_normal((3, 3)))
+    q *= np.sign(np.diag(r))
+    return q * np.linalg.det(q)
+
+
+def signature_vector(vertices: np.ndarray, faces: np.ndarray, params: Params | None = None):
+    """The signature vector of a mesh given as arrays, cleaned by `clean_mesh`."""
+    return compute_signature(clean_mesh(vertices, faces), params or Params()).vector
+
+
+def l1(a: np.ndarray, b: np.ndarray) -> float:
+    """The L1 distance between two signature vectors."""
+    return float(np.abs(a - b).sum())
+
+
+def off_text(vertices: np.ndarray, faces) -> str:
+    """An ASCII OFF file of a mesh: coordinates exactly (``repr``), faces of any length."""
+    lines = ["OFF", f"{len(vertices)} {len(faces)} 0"]
+    lines += [" ".join(map(repr, map(float, p))) for p in vertices]
+    lines += [f"{len(face)} " + " ".join(map(str, face)) for face in faces]
+    return "\n".join(lines) + "\n"
+
+
+def write_off(path: str | os.PathLike, vertices: np.ndarray, faces) -> Path:
+    """Write `off_text` to ``path``, creating its folder; return the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(off_text(vertices, faces))
+    return path
+
+
+def random_signature(seed: int, bins: int = 200) -> Signature:
+    """A signature of random values summing to 1, with a hash made of the seed."""
+    h = np.random.default_rng(seed).random(bins)
+    return Signature(h / h.sum(), np.zeros(3), 3, 1, 1, 0.0, (), 0.0, f"{seed:064d}")
+
+
+def build_index(path: str | os.PathLike, n: int = 10, params: Params | None = None) -> list:
+    """An index of ``n`` random signatures in classes c0, c1, c2; return their vectors."""
+    with IndexWriter(path, params or Params()) as w:
+        for i in range(n):
+            entry = Entry(f"c{i % 3}/{i}.off", f"c{i % 3}", f"/data/c{i % 3}/{i}.off")
+            w.add(entry, random_signature(i))
+    return [random_signature(i).vector for i in range(n)]
