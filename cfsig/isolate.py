@@ -87,7 +87,9 @@ def run_limited(func: Callable[..., Any], args: tuple, limits: Limits, what: str
         if os.WIFSIGNALED(status):
             name = signal.Signals(os.WTERMSIG(status)).name
             raise StageLimitError(f"{what} crashed ({name})")
-        raise StageLimitError(f"{what} exited without a result")
+        code = os.WEXITSTATUS(status)  # 0: the result would not pickle; else native code quit
+        detail = "" if code == 0 else f" (status {code}: out of memory in native code?)"
+        raise StageLimitError(f"{what} exited without a result{detail}")
     kind, value = pickle.loads(data)
     if kind == "memory":
         raise StageLimitError(f"{what} needed more than {limits.memory_mb} MiB")

@@ -17,6 +17,8 @@ from .errors import MeshError, MissingDependencyError
 from .geometry import Edges, mesh_edges
 
 MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
+# Larger coordinates overflow in squared lengths and products of them (float64 ends at 1.8e308).
+MAX_COORDINATE = 1e100
 
 
 @dataclass(frozen=True)
@@ -152,7 +154,8 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, weld: bool = True) -> Me
     Raises
     ------
     MeshError
-        Non-finite coordinates, face indices out of range, or no triangle left.
+        Non-finite coordinates or beyond `MAX_COORDINATE`, face indices out of range, or no
+        triangle left.
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces)
@@ -163,6 +166,11 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, weld: bool = True) -> Me
     if not np.all(np.isfinite(vertices)):
         bad = int(np.count_nonzero(~np.isfinite(vertices).all(axis=1)))
         raise MeshError(f"{bad} vertices have NaN or infinite coordinates")
+    if np.abs(vertices).max() > MAX_COORDINATE:
+        raise MeshError(
+            f"coordinates up to {np.abs(vertices).max():.3g}: beyond {MAX_COORDINATE:g}, areas "
+            "and curvatures overflow"
+        )
     if not np.issubdtype(faces.dtype, np.integer):
         raise MeshError("face indices are not integers")
     faces = faces.astype(np.int64)

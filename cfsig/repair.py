@@ -392,8 +392,8 @@ def boundary_loops(edges, n_vertices: int) -> list[np.ndarray]:
 def drop_enclosed(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     """Drop closed parts that lie inside another part (hidden inner geometry).
 
-    A part is inside when the generalized winding number of the other parts, consistently
-    oriented, is above one half in magnitude at most of its vertices.
+    A part is inside when the generalized winding number of another part, oriented
+    consistently in itself, is above one half in magnitude at most of its vertices.
 
     Parameters
     ----------
@@ -424,9 +424,13 @@ def drop_enclosed(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     for part in range(n_parts):
         members = np.flatnonzero(labels == part)
         probes = vertices[rng.choice(members, size=min(16, len(members)), replace=False)]
-        others = oriented[(face_part != part) & ~enclosed[face_part]]
-        winding = np.abs(igl.winding_number(vertices, others, probes))
-        enclosed[part] = np.median(winding) > 0.5
+        # Part by part: each is oriented in itself only, so the others' numbers may cancel.
+        for other in np.flatnonzero(~enclosed):
+            if other != part:
+                winding = igl.winding_number(vertices, oriented[face_part == other], probes)
+                if np.median(np.abs(winding)) > 0.5:
+                    enclosed[part] = True
+                    break
     if not enclosed.any():
         return vertices, faces, 0
     return vertices, faces[~enclosed[face_part]], int(enclosed.sum())

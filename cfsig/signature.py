@@ -277,7 +277,9 @@ def mesh_and_signature(
     mesh = parse_mesh(data, path)
     try:
         mesh, sig = _repair_and_sign(mesh, params, solver)
-    except (MeshError, SolverError) as exc:
+    except MeshError as exc:  # its subclasses too (a stage past its limits)
+        raise type(exc)(f"{path}: {exc}") from None
+    except SolverError as exc:
         raise MeshError(f"{path}: {exc}") from None
     seconds = time.perf_counter() - start
     return mesh, replace(sig, seconds=seconds, sha256=hashlib.sha256(data).hexdigest())

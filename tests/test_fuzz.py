@@ -21,10 +21,11 @@ from cfsig.params import Params
 from cfsig.signature import compute_signature, signature_file
 from tests.helpers import off_text
 
-# Huge coordinates overflow on the way to the typed error that they give: expected here.
-pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
+# No input may make NumPy warn: numerical trouble is a repair or a typed error.
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 BUDGET = settings(
     max_examples=60,
+    derandomize=True,  # the same examples in every run: CI is not flaky
     deadline=None,
     database=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
@@ -107,7 +108,8 @@ def test_random_soup_through_trimesh_formats(suffix, soup):
     if not np.isfinite(vertices).all() or faces.min() < 0 or faces.max() >= len(vertices):
         return  # trimesh writes only valid arrays; the OFF test covers the faults
     buffer = io.BytesIO()
-    trimesh.Trimesh(vertices, faces, process=False).export(buffer, file_type=suffix[1:])
+    with np.errstate(over="ignore"):  # writing huge coordinates as float32 (the test's side)
+        trimesh.Trimesh(vertices, faces, process=False).export(buffer, file_type=suffix[1:])
 
     def compute():
         return compute_signature(parse_mesh(buffer.getvalue(), f"soup{suffix}"), Params())

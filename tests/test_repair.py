@@ -1,0 +1,392 @@
+"""The repair stage: every route of `cfsig.repair.repair_mesh` on generated meshes."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cfsig import repair, signature
+from cfsig.batch import compute_many
+from cfsig.errors import MeshError, StageLimitError
+from cfsig.geometry import mesh_edges
+from cfsig.isolate import Limits
+from cfsig.mesh import Mesh, clean_mesh
+from cfsig.params import Params
+from cfsig.repair import boundary_loops, repair_mesh
+from cfsig.signature import compute_signature, signature_file
+from tests.helpers import icosphere, torus, write_off
+from tests.helpers import l1 as _l1
+
+SPHERE = icosphere(3)
+# A limit no proxy can meet: the remesh alone takes far longer than a millisecond.
+TINY = Limits(seconds=0.001)
+
+
+def _diagonal(v):
+    return float(np.linalg.norm(np.ptp(v, axis=0)))
+
+
+def _components(mesh: Mesh) -> int:
+    edges = mesh_edges(mesh.faces, len(mesh.vertices))
+    return repair._parts(edges.ends, len(mesh.vertices))[0]
+
+
+def _is_closed(mesh: Mesh) -> bool:
+    """Every edge in exactly two faces."""
+    return bool(np.all(np.diff(mesh_edges(mesh.faces, len(mesh.vertices)).starts) == 2))
+
+
+def _one_closed_manifold(mesh: Mesh) -> bool:
+    return _components(mesh) == 1 and _is_closed(mesh)
+
+
+def _has(mesh_or_sig, words: str) -> bool:
+    return any(words in r for r in mesh_or_sig.repairs)
+
+
+def _stack(*parts):
+    """One mesh of several (vertices, faces) parts, each with its own vertices."""
+    offsets = np.cumsum([0] + [len(v) for v, _ in parts[:-1]])
+    faces = [f + o for (_, f), o in zip(parts, offsets, strict=True)]
+    return np.vstack([v for v, _ in parts]), np.vstack(faces)
+
+
+def _cut(v, f, offset=0.1):
+    """The faces on either side of a tilted plane through the face centroids."""
+    normal = np.array([0.3, 0.2, 1.0]) / np.linalg.norm([0.3, 0.2, 1.0])
+    side = v[f].mean(axis=1) @ normal > offset
+    return f[~side], f[side], normal
+
+
+def _gapped(v, f, fraction=0.005):
+    """The mesh cut in two parts, each with its own vertices, one moved ``fraction`` of the
+    diagonal away (not along the plane's normal)."""
+    a, b, _ = _cut(v, f)
+    shift = fraction * _diagonal(v) * np.array([0.6, 0.0, 0.8])
+    return _stack((v, a), (v + shift, b))
+
+
+def _holed(v, f, n_holes=4, size=4):
+    """The mesh with ``n_holes`` disjoint patches of ``size`` faces removed."""
+    centroids = v[f].mean(axis=1)
+    seeds = [0, len(f) // 4, len(f) // 2, 3 * len(f) // 4][:n_holes]
+    drop = np.zeros(len(f), dtype=bool)
+    for seed in seeds:
+        drop[np.argsort(np.linalg.norm(centroids - centroids[seed], axis=1))[:size]] = True
+    return f[~drop]
+
+
+def _position_faces(v, f):
+    """The faces as sets of vertex positions, independent of the numbering."""
+    return {frozenset(map(tuple, v[face])) for face in f}
+
+
+# -- clean ------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("descriptor", ["cf", "cfhks"])
+def test_clean_closed_manifold_is_untouched(descriptor):
+    v, f = SPHERE
+    mesh = clean_mesh(v, f)
+    assert repair_mesh(mesh) is mesh and mesh.route == "clean"
+    auto = compute_signature(mesh, Params(descriptor=descriptor))
+    off = compute_signature(mesh, Params(descriptor=descriptor, repair="off"))
+    assert auto.route == off.route == "clean" and auto.repairs == ()
+    assert np.array_equal(auto.vector, off.vector) and np.array_equal(auto.phi, off.phi)
+
+
+def test_clean_torus_is_untouched():
+    mesh = clean_mesh(*torus(nu=24, nv=8))
+    for mode in ("auto", "proxy", "off"):
+        assert repair_mesh(mesh, mode) is mesh
+
+
+# -- repaired ---------------------------------------------------------------------------------
+
+
+def test_holes_are_closed():
+    v, f = SPHERE
+    holed = _holed(v, f)
+    mesh = clean_mesh(v, holed)
+    assert len(boundary_loops(mesh_edges(mesh.faces, len(mesh.vertices)), len(mesh.vertices))) == 4
+    repaired = repair_mesh(mesh)
+    assert repaired.route == "repaired"
+    assert _has(repaired, "closed 4 holes")
+    assert _one_closed_manifold(repaired)
+    # Euler characteristic of a sphere, and the surface around the holes kept exactly.
+    n_edges = len(mesh_edges(repaired.faces, len(repaired.vertices)).ends)
+    assert len(repaired.vertices) - n_edges + len(repaired.faces) == 2
+    assert _position_faces(v, holed) <= _position_faces(repaired.vertices, repaired.faces)
+    intact = compute_signature(clean_mesh(v, f), Params()).vector
+    auto = compute_signature(mesh, Params())
+    off = compute_signature(mesh, Params(repair="off"))
+    assert auto.route == "repaired" and off.route == "unrepaired"
+    assert _l1(off.vector, intact) > 0.1  # the holes matter when left open
+    assert _l1(auto.vector, intact) < 0.2 * _l1(off.vector, intact)
+
+
+@pytest.mark.parametrize("shape", [SPHERE, torus(nu=32, nv=12)], ids=["sphere", "torus"])
+def test_parts_with_a_small_gap_are_zipped(shape):
+    v, f = shape
+    gv, gf = _gapped(v, f)
+    mesh = clean_mesh(gv, gf)
+    assert _components(mesh) == 2 and not _is_closed(mesh)
+    repaired = repair_mesh(mesh)
+    assert repaired.route == "repaired"
+    assert _has(repaired, "stitched")
+    assert _one_closed_manifold(repaired)
+    assert len(repaired.vertices) == len(v) and len(repaired.faces) == len(f)  # a perfect zip
+    assert not _has(repaired, "holes") and not _has(repaired, "fragments")
+
+
+def test_zipped_sphere_signature_is_close_to_the_intact_one():
+    v, f = SPHERE
+    mesh = clean_mesh(*_gapped(v, f))
+    intact = compute_signature(clean_mesh(v, f), Params()).vector
+    auto = compute_signature(mesh, Params())
+    off = compute_signature(mesh, Params(repair="off"))
+    assert auto.route == "repaired" and auto.n_components == 1 and off.n_components == 2
+    assert _l1(auto.vector, intact) < 0.2 * _l1(off.vector, intact)
+
+
+def test_stitching_ignores_the_orientation_of_the_parts():
+    v, f = SPHERE
+    a, b, _ = _cut(v, f)
+    shift = 0.005 * _diagonal(v) * np.array([0.8, -0.6, 0.0])  # along the cut, not across
+    repaired = repair_mesh(clean_mesh(*_stack((v, a), (v + shift, b[:, ::-1]))))
+    assert repaired.route == "repaired" and _has(repaired, "stitched")
+    assert _one_closed_manifold(repaired) and len(repaired.vertices) == len(v)
+
+
+def test_parts_too_far_apart_are_not_stitched():
+    v, f = SPHERE
+    mesh = clean_mesh(*_gapped(v, f, fraction=5 * repair.STITCH_DISTANCE))
+    result = repair_mesh(mesh, "auto")
+    assert not _has(result, "stitched") and result.route == "proxy"
+
+
+def test_overlapping_parts_are_trimmed():
+    v, f = SPHERE
+    a, _, normal = _cut(v, f, offset=0.1)
+    centroids = v[f].mean(axis=1) @ normal
+    band = f[centroids > -0.05]  # the part above the cut, and a band of faces below it
+    shift = 0.001 * _diagonal(v) * np.array([0.0, 0.6, 0.8])
+    mesh = clean_mesh(*_stack((v, band), (v + shift, a)))
+    assert _components(mesh) == 2
+    repaired = repair_mesh(mesh)
+    assert repaired.route == "repaired"
+    assert _has(repaired, "lying on another part's surface")
+    assert _one_closed_manifold(repaired)
+    intact = compute_signature(clean_mesh(v, f), Params()).vector
+    off = compute_signature(mesh, Params(repair="off")).vector
+    auto = compute_signature(mesh, Params()).vector
+    assert _l1(auto, intact) < 0.2 * _l1(off, intact)
+
+
+def test_a_duplicate_copy_is_dropped_whole():
+    v, f = SPHERE
+    shift = 0.001 * _diagonal(v) * np.array([0.0, 0.6, 0.8])
+    repaired = repair_mesh(clean_mesh(*_stack((v, f), (v + shift, f))))
+    assert repaired.route == "repaired" and _has(repaired, f"dropped {len(f)} faces lying")
+    assert np.array_equal(repaired.vertices, v) and np.array_equal(repaired.faces, f)
+
+
+def _fin_and_stray():
+    """The sphere with a fin on the edge of its first face, and a stray open two-face patch."""
+    v, f = SPHERE
+    a, b = f[0, :2]
+    tip = (v[a] + v[b]) / 2 * 1.2
+    stray = np.array([[3.0, 0, 0], [3.1, 0, 0], [3.0, 0.1, 0], [3.1, 0.1, 0.05]])
+    n = len(v)
+    fin_face, stray_faces = [[a, b, n]], [[n + 1, n + 2, n + 3], [n + 2, n + 1, n + 4]]
+    return np.vstack([v, tip, stray]), np.vstack([f, fin_face, stray_faces])
+
+
+def test_fin_and_stray_fragment_are_dropped():
+    v, f = SPHERE
+    fv, ff = _fin_and_stray()
+    mesh = clean_mesh(fv, ff)
+    repaired = repair_mesh(mesh)
+    assert repaired.route == "repaired"
+    assert _has(repaired, "dropped 2 small open fragments")
+    assert _one_closed_manifold(repaired) and len(repaired.faces) == len(f)
+    clean = compute_signature(clean_mesh(v, f), Params())
+    fixed = compute_signature(mesh, Params())
+    assert fixed.route == "repaired"
+    assert _l1(fixed.vector, clean.vector) < 1e-9
+    np.testing.assert_allclose(fixed.phi, clean.phi, rtol=0, atol=1e-9)
+
+
+def test_too_many_parts_go_to_the_proxy(monkeypatch):
+    monkeypatch.setattr(repair, "MAX_PARTS", 2)
+    result = repair_mesh(clean_mesh(*_fin_and_stray()))  # three parts: sphere, fin, stray
+    assert result.route == "proxy" and not _has(result, "fragments")
+
+
+@pytest.mark.parametrize(
+    ("descriptor", "inner_first"),
+    [("cf", False), ("cf", True), ("cfhks", False)],
+    ids=["cf", "cf-inner-first", "cfhks"],
+)
+def test_hidden_inner_part_is_dropped(descriptor, inner_first):
+    v, f = SPHERE
+    inner = (0.3 * icosphere(2)[0] + 0.1, icosphere(2)[1])
+    parts = [inner, (v, f)] if inner_first else [(v, f), inner]
+    mesh = clean_mesh(*_stack(*parts))
+    repaired = repair_mesh(mesh)
+    assert repaired.route == "repaired" and _has(repaired, "dropped 1 parts enclosed")
+    assert np.array_equal(repaired.vertices, v) and np.array_equal(repaired.faces, f)
+    params = Params(descriptor=descriptor)
+    alone = compute_signature(clean_mesh(v, f), params)
+    both = compute_signature(mesh, params)
+    assert both.route == "repaired" and _has(both, "enclosed")
+    assert _l1(both.vector, alone.vector) <= 1e-12
+    assert np.abs(both.phi - alone.phi).max() <= 1e-12
+
+
+def test_nested_inner_parts_are_dropped_whatever_their_orientation():
+    v, f = SPHERE
+    small = icosphere(2)
+    nested = [(0.3 * small[0], small[1]), (0.6 * v, f), (v, f)]
+    mesh = clean_mesh(*_stack(*nested))
+    repaired = repair_mesh(mesh)  # all three spheres oriented alike
+    assert repaired.route == "repaired" and _has(repaired, "dropped 2 parts enclosed")
+
+
+def test_nested_inner_parts_with_a_reversed_middle_one_are_dropped():
+    v, f = SPHERE
+    small = icosphere(2)
+    nested = [(0.3 * small[0], small[1]), (0.6 * v, f[:, ::-1]), (v, f)]
+    repaired = repair_mesh(clean_mesh(*_stack(*nested)))
+    assert repaired.route == "repaired" and _has(repaired, "dropped 2 parts enclosed")
+    assert np.array_equal(repaired.vertices, v)
+
+
+# -- proxy ------------------------------------------------------------------------------------
+
+
+def _interpenetrating():
+    """Two unit spheres whose centres are 1.2 apart: one part each, neither enclosed."""
+    v, f = SPHERE
+    return _stack((v, f), (v + [1.2, 0, 0], f))
+
+
+def test_interpenetrating_parts_take_the_proxy():
+    mesh = clean_mesh(*_interpenetrating())
+    proxy = repair_mesh(mesh)
+    assert proxy.route == "proxy" and _has(proxy, "proxy of its outer surface")
+    assert _one_closed_manifold(proxy)
+    assert len(proxy.faces) <= repair.PROXY_FACES
+    # Just outside the union of the two spheres: its bounding box grown by under two cells.
+    cell = 3.2 / repair.PROXY_CELLS
+    low, high = proxy.vertices.min(axis=0), proxy.vertices.max(axis=0)
+    assert np.all(low <= [-1, -1, -1]) and np.all(low > np.array([-1, -1, -1]) - 2 * cell)
+    assert np.all(high >= [2.2, 1, 1]) and np.all(high < np.array([2.2, 1, 1]) + 2 * cell)
+    sig = compute_signature(mesh, Params())
+    assert sig.route == "proxy" and sig.n_components == 1 and np.isfinite(sig.vector).all()
+
+
+def test_disjoint_parts_take_the_proxy():
+    v, f = SPHERE
+    proxy = repair_mesh(clean_mesh(*_stack((v, f), (v + [5.0, 0, 0], f))))
+    assert proxy.route == "proxy" and _is_closed(proxy)
+    assert len(proxy.faces) <= repair.PROXY_FACES
+
+
+def test_proxy_mode():
+    v, f = SPHERE
+    holed = clean_mesh(v, _holed(v, f))
+    assert repair_mesh(holed, "auto").route == "repaired"  # local repairs would do
+    proxy = repair_mesh(holed, "proxy")
+    assert proxy.route == "proxy" and _one_closed_manifold(proxy)
+    assert len(proxy.faces) <= repair.PROXY_FACES
+    clean = clean_mesh(v, f)
+    assert repair_mesh(clean, "proxy") is clean and clean.route == "clean"
+
+
+def test_off_mode_leaves_the_mesh_as_read():
+    mesh = clean_mesh(*_interpenetrating())
+    result = repair_mesh(mesh, "off")
+    assert result.route == "unrepaired" and result.repairs == mesh.repairs
+    assert result.vertices is mesh.vertices and result.faces is mesh.faces
+    sig = compute_signature(mesh, Params(repair="off"))
+    assert sig.route == "unrepaired" and sig.n_components == 2
+
+
+def test_unknown_mode():
+    mesh = clean_mesh(*SPHERE)
+    with pytest.raises(ValueError, match="unknown repair mode"):
+        repair_mesh(mesh, "always")
+
+
+# -- limits -----------------------------------------------------------------------------------
+
+
+def test_proxy_past_its_time_limit():
+    mesh = clean_mesh(*_interpenetrating())
+    with pytest.raises(StageLimitError, match="longer than") as info:
+        repair_mesh(mesh, "auto", TINY)
+    assert isinstance(info.value, MeshError) and "proxy" in str(info.value)
+
+
+def test_proxy_past_its_memory_limit():
+    mesh = clean_mesh(*_interpenetrating())
+    with pytest.raises(StageLimitError):
+        repair_mesh(mesh, "proxy", Limits(memory_mb=64))
+
+
+def _tiny_limits(path, params, solver):
+    """`signature_file` with the proxy allowed only a millisecond (a worker of the batch)."""
+    original = signature.repair_mesh
+    signature.repair_mesh = lambda mesh, mode: original(mesh, mode, TINY)
+    try:
+        return signature_file(path, params, solver)
+    finally:
+        signature.repair_mesh = original
+
+
+def test_limit_error_names_the_file(tmp_path):
+    path = write_off(tmp_path / "two.off", *_interpenetrating())
+    with pytest.raises(StageLimitError) as info:  # the type is kept, the file named
+        _tiny_limits(path, Params(), "auto")
+    message = str(info.value)
+    assert message.startswith(f"{path}: ") and "longer than" in message
+    assert "\n" not in message
+
+
+def test_batch_goes_on_past_a_limit(tmp_path):
+    slow = write_off(tmp_path / "two.off", *_interpenetrating())
+    good = write_off(tmp_path / "sphere.off", *SPHERE)
+    outcomes = {
+        Path(o.path).name: o
+        for o in compute_many([slow, good], Params(), jobs=1, compute=_tiny_limits)
+    }
+    assert sorted(outcomes) == ["sphere.off", "two.off"]
+    assert outcomes["sphere.off"].error == ""
+    expected = signature_file(good, Params())
+    assert np.array_equal(outcomes["sphere.off"].signature.vector, expected.vector)
+    failed = outcomes["two.off"]
+    assert failed.signature is None
+    assert failed.error.startswith(f"{slow}: ") and "longer than" in failed.error
+    assert "\n" not in failed.error
+
+
+# -- parameters -------------------------------------------------------------------------------
+
+
+def test_params_of_an_index_from_before_the_repair_stage():
+    old = json.loads(Params().to_json())
+    del old["repair"]
+    assert Params.from_json(json.dumps(old)).repair == "off"
+    assert Params.from_json(Params(repair="proxy").to_json()).repair == "proxy"
+    assert Params().repair == "auto"
+
+
+def test_unknown_repair_mode_in_params():
+    with pytest.raises(ValueError, match="unknown repair mode"):
+        Params(repair="always")
+    bad = json.loads(Params().to_json())
+    bad["repair"] = "always"
+    with pytest.raises(ValueError, match="unknown repair mode"):
+        Params.from_json(json.dumps(bad))
