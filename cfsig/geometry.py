@@ -88,7 +88,7 @@ def corner_angles(lengths: np.ndarray) -> np.ndarray:
     """
     a, b, c = lengths.T
     a2, b2, c2 = a * a, b * b, c * c
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         cos = np.stack(
             [
                 (b2 + c2 - a2) / (2 * b * c),
