@@ -4,7 +4,7 @@ The conformal factor is defined on a closed manifold (paper section 2); on a mod
 separate parts it is solved per part, and each part gets an unrelated distribution (the paper's
 "most important drawback", section 4). `repair_mesh` runs between reading (`cfsig.mesh`, which
 always welds, drops duplicates and degenerate faces and splits non-manifold vertices) and the
-numerics, and chooses one of three routes (docs/method.md, "Repair"):
+numerics, and chooses one of three routes (docs/method.md, section 1b):
 
 - ``clean``: the mesh is one closed manifold; it passes unchanged, bit for bit.
 - ``repaired``: local repairs make it one: parts whose boundaries nearly meet are stitched,
@@ -22,11 +22,12 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from .errors import MeshError
-from .geometry import edge_lengths, face_areas, mesh_edges
+from .geometry import Edges, edge_lengths, face_areas, mesh_edges
 from .isolate import Limits, run_limited
 from .mesh import Mesh, clean_mesh
 from .params import REPAIR_MODES
@@ -76,9 +77,8 @@ def repair_mesh(mesh: Mesh, mode: str = "auto", limits: Limits | None = None) ->
     """
     if mode not in REPAIR_MODES:
         raise ValueError(f"unknown repair mode {mode!r}; choose from {', '.join(REPAIR_MODES)}")
-    edges = mesh.edges if mesh.edges is not None else mesh_edges(mesh.faces, len(mesh.vertices))
-    n_parts, labels = _parts(edges.ends, len(mesh.vertices))
-    if n_parts == 1 and np.all(np.diff(edges.starts) == 2):
+    n_parts, labels, closed = _surface(mesh)
+    if n_parts == 1 and closed:
         return mesh
     if mode == "off":
         return replace(mesh, route="unrepaired")
@@ -114,9 +114,8 @@ def _local_repairs(mesh: Mesh, labels: np.ndarray) -> Mesh | None:
     if enclosed:
         done.append(f"dropped {enclosed} parts enclosed by another")
     result = clean_mesh(vertices, faces, weld=False)
-    edges = result.edges if result.edges is not None else mesh_edges(result.faces, len(vertices))
-    n_parts, _ = _parts(edges.ends, len(result.vertices))
-    if n_parts != 1 or not np.all(np.diff(edges.starts) == 2):
+    n_parts, _, closed = _surface(result)
+    if n_parts != 1 or not closed:
         return None
     return replace(result, repairs=tuple(done), route="repaired")
 
@@ -342,7 +341,7 @@ def fill_holes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.
     return np.vstack(new_vertices), np.vstack(new_faces), len(loops)
 
 
-def boundary_loops(edges, n_vertices: int) -> list[np.ndarray]:
+def boundary_loops(edges: Edges, n_vertices: int) -> list[np.ndarray]:
     """The boundary edges as closed loops of vertices.
 
     Parameters
@@ -503,10 +502,15 @@ def offset_surface(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
     return np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
 
 
+def _surface(mesh: Mesh) -> tuple[int, np.ndarray, bool]:
+    """A mesh's number of parts, the part of each vertex, and whether every edge has two faces."""
+    edges = mesh.edges if mesh.edges is not None else mesh_edges(mesh.faces, len(mesh.vertices))
+    n_parts, labels = _parts(edges.ends, len(mesh.vertices))
+    return n_parts, labels, bool(np.all(np.diff(edges.starts) == 2))
+
+
 def _parts(ends: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
     """Connected components of the vertex graph given by its edges."""
-    import scipy.sparse as sp
-
     graph = sp.coo_matrix(
         (np.ones(len(ends)), (ends[:, 0], ends[:, 1])), shape=(n_vertices, n_vertices)
     )
