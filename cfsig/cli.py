@@ -497,7 +497,11 @@ def evaluate(
         (result,) = results.values()
         report = result.report
         if as_json:
-            computed = {"repair": dict(routes)} if folder else {}
+            computed = (
+                {"repair": dict(routes), "seconds_per_mesh": result.seconds_per_mesh}
+                if folder
+                else {}
+            )
             click.echo(json.dumps({**report.to_dict(), **computed}, indent=2))
         else:
             click.echo(_format_report(report))

@@ -104,7 +104,10 @@ def operators(mesh: Mesh, mollify: float = 1e-5) -> Operators:
     laplacian = geometry.cotan_laplacian(lengths, faces, n, areas, mesh.edges)
     boundary = geometry.boundary_vertices(faces, laplacian)
     curvature = geometry.angle_defect(geometry.corner_angles(lengths), faces, boundary)
-    count, labels = geometry.components(laplacian)
+    if mesh.parts is None:
+        count, labels = geometry.components(laplacian)
+    else:  # the same graph as the Laplacian's pattern, so the same numbering
+        count, labels = int(mesh.parts.max()) + 1, mesh.parts
     vertex_area = geometry.vertex_areas(areas, faces, n)
     target = geometry.target_curvature(curvature, vertex_area, labels)
     return Operators(

@@ -39,6 +39,10 @@ class Mesh:
     route : str
         Which route of `cfsig.repair.repair_mesh` the mesh took: ``"clean"`` (one closed
         manifold, as read), ``"repaired"``, ``"proxy"`` or ``"unrepaired"``.
+    parts : (n,) int or None
+        Connected component of each vertex, numbered as `geometry.components` numbers them,
+        kept from the repair stage's check so that the solve need not find them again; None
+        when not known.
     """
 
     vertices: np.ndarray
@@ -46,6 +50,7 @@ class Mesh:
     repairs: tuple[str, ...] = ()
     edges: Edges | None = None
     route: str = "clean"
+    parts: np.ndarray | None = None
 
 
 def read_mesh(path: str | os.PathLike) -> Mesh:

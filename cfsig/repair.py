@@ -79,7 +79,7 @@ def repair_mesh(mesh: Mesh, mode: str = "auto", limits: Limits | None = None) ->
         raise ValueError(f"unknown repair mode {mode!r}; choose from {', '.join(REPAIR_MODES)}")
     n_parts, labels, closed = _surface(mesh)
     if n_parts == 1 and closed:
-        return mesh
+        return replace(mesh, parts=labels)
     if mode == "off":
         return replace(mesh, route="unrepaired")
     if mode == "auto" and n_parts <= MAX_PARTS:
@@ -510,9 +510,11 @@ def _surface(mesh: Mesh) -> tuple[int, np.ndarray, bool]:
 
 
 def _parts(ends: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
-    """Connected components of the vertex graph given by its edges."""
-    graph = sp.coo_matrix(
-        (np.ones(len(ends)), (ends[:, 0], ends[:, 1])), shape=(n_vertices, n_vertices)
-    )
+    """Connected components of the vertex graph given by its edges, sorted as `mesh_edges`
+    sorts them (so that the graph's rows are laid out directly)."""
+    indptr = np.zeros(n_vertices + 1, dtype=np.int64)
+    np.cumsum(np.bincount(ends[:, 0], minlength=n_vertices), out=indptr[1:])
+    data = np.ones(len(ends), dtype=np.int8)
+    graph = sp.csr_matrix((data, ends[:, 1], indptr), shape=(n_vertices, n_vertices))
     count, labels = connected_components(graph, directed=False)
     return int(count), labels

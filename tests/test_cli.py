@@ -126,7 +126,9 @@ def test_query_errors(tmp_path, collection):
 def test_evaluate_folder_index_and_cla(collection, built_index, tmp_path):
     result = _run("evaluate", collection, "--json", "-j", "1")
     report = json.loads(result.stdout)
-    assert set(report) == {"measures", "per_class", "precision_recall", "count", "repair"}
+    computed = {"repair", "seconds_per_mesh"}  # from a folder only
+    assert set(report) == {"measures", "per_class", "precision_recall", "count", *computed}
+    assert report["seconds_per_mesh"] > 0
     assert report["repair"] == {"clean": 18}  # the generated meshes are closed manifolds
     assert set(report["measures"]) == {"NN", "FT", "ST", "E", "DCG", "mAP"}
     assert report["count"] == 18 and len(report["precision_recall"]) == 20
