@@ -448,7 +448,9 @@ def proxy_mesh(mesh: Mesh, limits: Limits) -> Mesh:
     Returns
     -------
     mesh : Mesh
-        The proxy, checked, with ``route="proxy"``.
+        The proxy's largest part by area, checked, with ``route="proxy"``: parts further apart
+        than the offset stay apart on the grid, and each would get its own unrelated
+        distribution of phi (the paper's drawback this stage exists for).
 
     Raises
     ------
@@ -461,7 +463,15 @@ def proxy_mesh(mesh: Mesh, limits: Limits) -> Mesh:
     if len(faces) == 0:
         raise MeshError("the proxy surface is empty (a flat or degenerate model)")
     proxy = clean_mesh(vertices, faces)
+    n_parts, labels, _ = _surface(proxy)
     note = f"replaced by a proxy of its outer surface ({len(proxy.faces)} faces)"
+    if n_parts > 1:
+        face_part = labels[proxy.faces[:, 0]]
+        lengths = edge_lengths(proxy.vertices, proxy.faces)
+        largest = np.argmax(np.bincount(face_part, face_areas(lengths), n_parts))
+        proxy = clean_mesh(proxy.vertices, proxy.faces[face_part == largest], weld=False)
+        note = f"replaced by a proxy of its outer surface, its largest of {n_parts} parts "
+        note += f"({len(proxy.faces)} faces)"
     return replace(proxy, repairs=(*mesh.repairs, note), route="proxy")
 
 

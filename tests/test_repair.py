@@ -293,11 +293,13 @@ def test_interpenetrating_parts_take_the_proxy():
     assert sig.route == "proxy" and sig.n_components == 1 and np.isfinite(sig.vector).all()
 
 
-def test_disjoint_parts_take_the_proxy():
+def test_disjoint_parts_take_the_proxy_which_keeps_the_largest():
     v, f = SPHERE
-    proxy = repair_mesh(clean_mesh(*_stack((v, f), (v + [5.0, 0, 0], f))))
-    assert proxy.route == "proxy" and _is_closed(proxy)
+    proxy = repair_mesh(clean_mesh(*_stack((v, f), (0.5 * v + [5.0, 0, 0], f))))
+    assert proxy.route == "proxy" and _one_closed_manifold(proxy)
     assert len(proxy.faces) <= repair.PROXY_FACES
+    assert _has(proxy, "largest of 2 parts")
+    assert proxy.vertices[:, 0].max() < 1.5  # the big sphere's, around the origin
 
 
 def test_proxy_mode():
