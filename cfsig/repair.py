@@ -158,7 +158,7 @@ def trim_overlaps(
     n_parts = int(labels.max()) + 1
     if n_parts < 2:
         return faces, 0
-    area = np.bincount(face_part, face_areas(edge_lengths(vertices, faces)), n_parts)
+    area = _part_areas(vertices, faces, face_part, n_parts)
     keep = np.zeros(len(faces), dtype=bool)
     order = np.argsort(-area, kind="stable")
     keep[face_part == order[0]] = True
@@ -298,7 +298,7 @@ def drop_fragments(
     edges = mesh_edges(faces, len(vertices))
     n_parts, labels = _parts(edges.ends, len(vertices))
     face_part = labels[faces[:, 0]]
-    area = np.bincount(face_part, face_areas(edge_lengths(vertices, faces)), n_parts)
+    area = _part_areas(vertices, faces, face_part, n_parts)
     open_part = np.zeros(n_parts, dtype=bool)
     open_part[labels[edges.ends[np.diff(edges.starts) == 1, 0]]] = True
     drop = open_part & (area < fraction * area.sum())
@@ -467,8 +467,7 @@ def proxy_mesh(mesh: Mesh, limits: Limits) -> Mesh:
     note = f"replaced by a proxy of its outer surface ({len(proxy.faces)} faces)"
     if n_parts > 1:
         face_part = labels[proxy.faces[:, 0]]
-        lengths = edge_lengths(proxy.vertices, proxy.faces)
-        largest = np.argmax(np.bincount(face_part, face_areas(lengths), n_parts))
+        largest = np.argmax(_part_areas(proxy.vertices, proxy.faces, face_part, n_parts))
         proxy = clean_mesh(proxy.vertices, proxy.faces[face_part == largest], weld=False)
         note = f"replaced by a proxy of its outer surface, its largest of {n_parts} parts "
         note += f"({len(proxy.faces)} faces)"
@@ -510,6 +509,13 @@ def offset_surface(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
             vertices, faces.astype(np.int32), target_count=PROXY_FACES
         )
     return np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
+
+
+def _part_areas(
+    vertices: np.ndarray, faces: np.ndarray, face_part: np.ndarray, n_parts: int
+) -> np.ndarray:
+    """The surface area of each part, (n_parts,) in squared length units."""
+    return np.bincount(face_part, face_areas(edge_lengths(vertices, faces)), n_parts)
 
 
 def _surface(mesh: Mesh) -> tuple[int, np.ndarray, bool]:
