@@ -44,7 +44,7 @@ MAX_PARTS = 64
 # The proxy's grid: cells along the bounding box's longest side, and the offset of its
 # iso-surface outside the input, in cells.
 PROXY_CELLS = 64
-PROXY_OFFSET = 0.5
+PROXY_OFFSET = 2.0
 # Marching cubes gives more faces the larger the surface; the proxy is simplified to this many.
 PROXY_FACES = 8000
 
