@@ -284,11 +284,13 @@ def test_interpenetrating_parts_take_the_proxy():
     assert proxy.route == "proxy" and _has(proxy, "proxy of its outer surface")
     assert _one_closed_manifold(proxy)
     assert len(proxy.faces) <= repair.PROXY_FACES
-    # Just outside the union of the two spheres: its bounding box grown by under two cells.
+    # Just outside the union of the two spheres: its bounding box grown by the offset, give or
+    # take one cell.
     cell = 3.2 / repair.PROXY_CELLS
+    grown = (repair.PROXY_OFFSET + 1) * cell
     low, high = proxy.vertices.min(axis=0), proxy.vertices.max(axis=0)
-    assert np.all(low <= [-1, -1, -1]) and np.all(low > np.array([-1, -1, -1]) - 2 * cell)
-    assert np.all(high >= [2.2, 1, 1]) and np.all(high < np.array([2.2, 1, 1]) + 2 * cell)
+    assert np.all(low <= [-1, -1, -1]) and np.all(low > np.array([-1, -1, -1]) - grown)
+    assert np.all(high >= [2.2, 1, 1]) and np.all(high < np.array([2.2, 1, 1]) + grown)
     sig = compute_signature(mesh, Params())
     assert sig.route == "proxy" and sig.n_components == 1 and np.isfinite(sig.vector).all()
 
