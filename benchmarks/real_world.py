@@ -45,7 +45,8 @@ def main() -> None:
     report = json.loads(done.stdout)
     lines = done.stderr.replace("\r", "\n").splitlines()
     warnings = [line for line in lines if WARNING.search(line)]
-    skipped = [line.strip() for line in lines if line.startswith("  ")]
+    listed = [i for i, line in enumerate(lines) if line.startswith("Skipped ")]
+    skipped = [line.strip() for line in lines[listed[0] + 1 :]] if listed else []
     measures = report["measures"]
     text = "\n".join(
         [
