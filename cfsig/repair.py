@@ -100,8 +100,8 @@ def _local_repairs(mesh: Mesh, labels: np.ndarray) -> Mesh | None:
     faces, trimmed = trim_overlaps(vertices, faces, labels, OVERLAP_DISTANCE * diagonal)
     if trimmed:
         done.append(f"dropped {trimmed} faces lying on another part's surface")
-    vertices, faces = _tidy(vertices, faces)
-    vertices, faces, stitched = stitch(vertices, faces, STITCH_DISTANCE * diagonal)
+    # Each step gets the faces cleaned after the one before, with the edges of that cleaning.
+    vertices, faces, stitched = stitch(*_tidy(vertices, faces), STITCH_DISTANCE * diagonal)
     if stitched:
         done.append(f"stitched {stitched} pairs of boundary vertices between parts")
     vertices, faces, dropped = drop_fragments(*_tidy(vertices, faces), FRAGMENT_AREA)
@@ -120,10 +120,11 @@ def _local_repairs(mesh: Mesh, labels: np.ndarray) -> Mesh | None:
     return replace(result, repairs=tuple(done), route="repaired")
 
 
-def _tidy(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """`clean_mesh` without welding: faces that became degenerate or repeated go, fans split."""
+def _tidy(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, Edges | None]:
+    """`clean_mesh` without welding (faces that became degenerate or repeated go, fans split):
+    vertices, faces and their edges when the cleaning kept them."""
     mesh = clean_mesh(vertices, faces, weld=False)
-    return mesh.vertices, mesh.faces
+    return mesh.vertices, mesh.faces, mesh.edges
 
 
 def trim_overlaps(
@@ -173,7 +174,7 @@ def trim_overlaps(
 
 
 def stitch(
-    vertices: np.ndarray, faces: np.ndarray, distance: float
+    vertices: np.ndarray, faces: np.ndarray, edges: Edges | None, distance: float
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Zip together the boundaries of different parts that run side by side.
 
@@ -188,6 +189,8 @@ def stitch(
         Vertex positions.
     faces : (m, 3) int64
         Triangles with at most two faces per edge and one fan per vertex.
+    edges : geometry.Edges or None
+        The faces' `geometry.mesh_edges` when already known (`clean_mesh` keeps them).
     distance : float
         Largest distance between two vertices to merge, in length units.
 
@@ -202,8 +205,7 @@ def stitch(
         Number of pairs merged.
     """
     n = len(vertices)
-    edges = mesh_edges(faces, n)
-    _, labels = _parts(edges.ends, n)
+    edges, _, labels = _face_graph(faces, n, edges)
     loops = boundary_loops(edges, n)
     if len(loops) < 2:
         return vertices, faces, 0
@@ -273,7 +275,7 @@ def _seeds(
 
 
 def drop_fragments(
-    vertices: np.ndarray, faces: np.ndarray, fraction: float
+    vertices: np.ndarray, faces: np.ndarray, edges: Edges | None, fraction: float
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Drop open parts whose area is below a fraction of the total.
 
@@ -283,6 +285,8 @@ def drop_fragments(
         Vertex positions.
     faces : (m, 3) int64
         Triangles.
+    edges : geometry.Edges or None
+        The faces' `geometry.mesh_edges` when already known (`clean_mesh` keeps them).
     fraction : float
         Area fraction below which an open part is dropped.
 
@@ -295,8 +299,7 @@ def drop_fragments(
     dropped : int
         Number of parts dropped.
     """
-    edges = mesh_edges(faces, len(vertices))
-    n_parts, labels = _parts(edges.ends, len(vertices))
+    edges, n_parts, labels = _face_graph(faces, len(vertices), edges)
     face_part = labels[faces[:, 0]]
     area = _part_areas(vertices, faces, face_part, n_parts)
     open_part = np.zeros(n_parts, dtype=bool)
@@ -307,7 +310,9 @@ def drop_fragments(
     return vertices, faces[~drop[face_part]], int(drop.sum())
 
 
-def fill_holes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+def fill_holes(
+    vertices: np.ndarray, faces: np.ndarray, edges: Edges | None = None
+) -> tuple[np.ndarray, np.ndarray, int]:
     """Close every boundary loop: a triangle for a loop of three, else a fan from its centroid.
 
     Parameters
@@ -317,6 +322,8 @@ def fill_holes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.
     faces : (m, 3) int64
         Triangles with at most two faces per edge and one fan per vertex (`clean_mesh`), so
         that every boundary vertex has exactly two boundary edges.
+    edges : geometry.Edges or None
+        The faces' `geometry.mesh_edges` when already known (`clean_mesh` keeps them).
 
     Returns
     -------
@@ -327,7 +334,7 @@ def fill_holes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.
     filled : int
         Number of loops closed.
     """
-    loops = boundary_loops(mesh_edges(faces, len(vertices)), len(vertices))
+    loops = boundary_loops(_face_graph(faces, len(vertices), edges)[0], len(vertices))
     new_vertices, new_faces = [vertices], [faces]
     count = len(vertices)
     for loop in loops:
@@ -388,7 +395,9 @@ def boundary_loops(edges: Edges, n_vertices: int) -> list[np.ndarray]:
     return loops
 
 
-def drop_enclosed(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+def drop_enclosed(
+    vertices: np.ndarray, faces: np.ndarray, edges: Edges | None = None
+) -> tuple[np.ndarray, np.ndarray, int]:
     """Drop closed parts that lie inside another part (hidden inner geometry).
 
     A part is inside when the generalized winding number of another part, oriented
@@ -400,6 +409,8 @@ def drop_enclosed(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
         Vertex positions.
     faces : (m, 3) int64
         Triangles.
+    edges : geometry.Edges or None
+        The faces' `geometry.mesh_edges` when already known (`clean_mesh` keeps them).
 
     Returns
     -------
@@ -412,8 +423,7 @@ def drop_enclosed(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     """
     import igl
 
-    edges = mesh_edges(faces, len(vertices))
-    n_parts, labels = _parts(edges.ends, len(vertices))
+    _, n_parts, labels = _face_graph(faces, len(vertices), edges)
     if n_parts < 2:
         return vertices, faces, 0
     oriented, _ = igl.bfs_orient(faces)
@@ -520,9 +530,18 @@ def _part_areas(
 
 def _surface(mesh: Mesh) -> tuple[int, np.ndarray, bool]:
     """A mesh's number of parts, the part of each vertex, and whether every edge has two faces."""
-    edges = mesh.edges if mesh.edges is not None else mesh_edges(mesh.faces, len(mesh.vertices))
-    n_parts, labels = _parts(edges.ends, len(mesh.vertices))
+    edges, n_parts, labels = _face_graph(mesh.faces, len(mesh.vertices), mesh.edges)
     return n_parts, labels, bool(np.all(np.diff(edges.starts) == 2))
+
+
+def _face_graph(
+    faces: np.ndarray, n_vertices: int, edges: Edges | None
+) -> tuple[Edges, int, np.ndarray]:
+    """The edges (sorted now unless given), the number of parts and the part of each vertex."""
+    if edges is None:
+        edges = mesh_edges(faces, n_vertices)
+    n_parts, labels = _parts(edges.ends, n_vertices)
+    return edges, n_parts, labels
 
 
 def _parts(ends: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
