@@ -10,21 +10,27 @@ bending, computed from the one factorisation that the conformal factor's solve m
 - ``spectrum``: ``log(lambda_i * area)`` of the ``EIGENPAIRS`` smallest nonzero eigenvalues
   (ShapeDNA, Reuter et al. 2006, on a logarithmic scale), compared by the mean absolute
   difference.
-- ``heat``: for each diffusion time ``t = tau * area`` in ``TIMES``, the distribution of
-  ``log(area * h_t(x))`` over the surface, h the heat kernel signature; 1-Wasserstein distance
-  per time.
+- ``heat``: for each diffusion time ``t = tau * area`` of the version's ``times``, the
+  distribution of ``log(area * h_t(x))`` over the surface, h the heat kernel signature;
+  1-Wasserstein distance per time.
 
 The distance between two meshes is the sum over channels of the channel's distance divided by
-its ``SCALES`` entry, the median of that distance over all pairs of an unlabelled collection
-(the heat channel: each time by its own median, their sum again by the median of the sum), so
-that each channel weighs equally. Every entry of the vector is premultiplied by its weight, so
-the descriptor's distance is the plain L1 distance of the vectors and the index and search
-treat every descriptor alike.
+a constant of the version (`Design`): a median of that distance over the pairs of unlabelled
+collections, divided by the channel's weight. Every entry of the vector is premultiplied by
+its divisor's inverse, so the descriptor's distance is the plain L1 distance of the vectors
+and the index and search treat every descriptor alike.
+
+Versions (`Params.version`; an index stores its own, and a query recomputes with it):
+
+1. Four times (0.005 to 0.04), equal weights, medians over SHREC 2007's pairs.
+2. Eight times (0.0025 to 0.32, doubling), weights 1/2 (phi), 1 (spectrum), 3 (heat) and the
+   heat distance averaged over the times, all chosen on SHREC 2007 and McGill together, with
+   the medians averaged over those two collections.
 """
 
 from __future__ import annotations
 
-from typing import TypedDict
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,27 +39,42 @@ from .spectrum import heat_kernel_signature, laplace_spectrum
 
 QUANTILES = 64
 EIGENPAIRS = 30
-TIMES = (0.005, 0.01, 0.02, 0.04)  # diffusion time / surface area
 
 
-# Medians of the channel distances over all pairs of SHREC 2007's 400 meshes, without their
-# labels: `python benchmarks/descriptors.py scales` prints them.
-class Scales(TypedDict):
-    """The channel scales: one number per channel, one per diffusion time for ``heat``."""
+@dataclass(frozen=True)
+class Design:
+    """The constants of one version of ``cfhks``.
 
+    Attributes
+    ----------
+    times : tuple of float
+        Diffusion times of the heat channel divided by the surface area (dimensionless).
+    phi, spectrum : float
+        Divisors of the phi and the spectrum distance.
+    heat : tuple of float
+        Divisor of each time's heat distance, one per time.
+    """
+
+    times: tuple[float, ...]
     phi: float
     spectrum: float
-    heat: tuple[float, float, float, float]
-    heat_sum: float
+    heat: tuple[float, ...]
+
+    @property
+    def length(self) -> int:
+        """Length of the descriptor vector."""
+        return QUANTILES + EIGENPAIRS + QUANTILES * len(self.times)
 
 
-SCALES: Scales = {
-    "phi": 1.834,
-    "spectrum": 0.2815,
-    "heat": (0.1176, 0.1588, 0.2298, 0.2984),
-    "heat_sum": 4.038,
+_V1_HEAT = (0.1176, 0.1588, 0.2298, 0.2984)  # per time, then their sum's median, 4.038
+_V2_TIMES = tuple(0.0025 * 2.0**j for j in range(8))
+# The medians are printed by `python benchmarks/descriptors.py study` (docs/descriptors.md):
+# version 1 over SHREC 2007's pairs; version 2 the mean of SHREC 2007's and McGill's, each
+# divided by its channel's weight (phi 1/2, heat 3, its time average taken by the divisor).
+DESIGNS = {
+    1: Design((0.005, 0.01, 0.02, 0.04), 1.834, 0.2815, tuple(s * 4.038 for s in _V1_HEAT)),
+    2: Design(_V2_TIMES, 1.7167 / 0.5, 0.3173, (len(_V2_TIMES) * 0.2152 / 3,) * len(_V2_TIMES)),
 }
-LENGTH = QUANTILES + EIGENPAIRS + QUANTILES * len(TIMES)
 
 
 def weighted_quantiles(values: np.ndarray, weights: np.ndarray, count: int) -> np.ndarray:
@@ -80,20 +101,22 @@ def weighted_quantiles(values: np.ndarray, weights: np.ndarray, count: int) -> n
     return values[order][picked]
 
 
-def channels(cf: ConformalFactor) -> dict[str, np.ndarray]:
+def channels(cf: ConformalFactor, times: tuple[float, ...]) -> dict[str, np.ndarray]:
     """The unweighted channels of a mesh whose conformal factor is known.
 
     Parameters
     ----------
     cf : ConformalFactor
         Result of `conformal.conformal_factor`, whose factorisation is reused.
+    times : tuple of float
+        Diffusion times of the heat channel divided by the surface area (`Design.times`).
 
     Returns
     -------
     channels : dict
         ``"phi"``: (QUANTILES,) quantiles of phi, dimensionless. ``"spectrum"``: (EIGENPAIRS,)
         ``log(lambda_i * area)``; a mesh with fewer nonzero eigenvalues repeats its largest.
-        ``"heat"``: (len(TIMES), QUANTILES) quantiles of ``log(area * h_t)``.
+        ``"heat"``: (len(times), QUANTILES) quantiles of ``log(area * h_t)``.
 
     Raises
     ------
@@ -107,7 +130,7 @@ def channels(cf: ConformalFactor) -> dict[str, np.ndarray]:
     weights = cf.operators.vertex_area / area
     scaled = np.log(spectrum.eigenvalues * area)
     scaled = np.concatenate([scaled, np.full(EIGENPAIRS - len(scaled), scaled[-1])])
-    hks = heat_kernel_signature(spectrum, np.asarray(TIMES) * area)
+    hks = heat_kernel_signature(spectrum, np.asarray(times) * area)
     heat = np.array([weighted_quantiles(np.log(area * h), weights, QUANTILES) for h in hks.T])
     return {
         "phi": weighted_quantiles(cf.phi, weights, QUANTILES),
@@ -116,31 +139,50 @@ def channels(cf: ConformalFactor) -> dict[str, np.ndarray]:
     }
 
 
-def cfhks_vector(cf: ConformalFactor) -> np.ndarray:
-    """The ``cfhks`` descriptor: the channels weighted so that L1 is the descriptor's distance.
+def weigh(parts: dict[str, np.ndarray], design: Design) -> np.ndarray:
+    """The descriptor vector of a mesh's channels: L1 between two of them is their distance.
+
+    Parameters
+    ----------
+    parts : dict
+        What `channels` returns for ``design.times``.
+    design : Design
+        The version's divisors.
+
+    Returns
+    -------
+    vector : (design.length,) float64
+        ``phi`` quantiles, then the log spectrum, then the heat quantiles time by time, each
+        entry divided by its channel's length and divisor.
+    """
+    return np.concatenate(
+        [
+            parts["phi"] / (QUANTILES * design.phi),
+            parts["spectrum"] / (EIGENPAIRS * design.spectrum),
+            (parts["heat"] / (QUANTILES * np.asarray(design.heat)[:, None])).ravel(),
+        ]
+    )
+
+
+def cfhks_vector(cf: ConformalFactor, version: int) -> np.ndarray:
+    """The ``cfhks`` descriptor of a mesh whose conformal factor is known.
 
     Parameters
     ----------
     cf : ConformalFactor
         Result of `conformal.conformal_factor`.
+    version : int
+        A key of `DESIGNS`.
 
     Returns
     -------
-    vector : (LENGTH,) float64
-        ``phi`` quantiles, then the log spectrum, then the heat quantiles time by time, each
-        entry divided by its channel's length and scale.
+    vector : (DESIGNS[version].length,) float64
+        See `weigh`.
 
     Raises
     ------
     SolverError
         The eigenvalue iteration failed.
     """
-    parts = channels(cf)
-    heat_scales = np.asarray(SCALES["heat"])[:, None] * SCALES["heat_sum"]
-    return np.concatenate(
-        [
-            parts["phi"] / (QUANTILES * SCALES["phi"]),
-            parts["spectrum"] / (EIGENPAIRS * SCALES["spectrum"]),
-            (parts["heat"] / (QUANTILES * heat_scales)).ravel(),
-        ]
-    )
+    design = DESIGNS[version]
+    return weigh(channels(cf, design.times), design)

@@ -89,9 +89,16 @@ def _with(options: list[Callable]) -> Callable:
 
 
 def _params(base: Params | None = None, **given: Any) -> Params:
-    """Parameters from the options that were given, on top of ``base`` or the defaults."""
+    """Parameters from the options that were given, on top of ``base`` or the defaults.
+
+    A descriptor other than ``base``'s is taken at its latest version.
+    """
+    given = {k: v for k, v in given.items() if v is not None}
     try:
-        return replace(base or Params(), **{k: v for k, v in given.items() if v is not None})
+        base = base or Params()
+        if "descriptor" in given:
+            base = base.with_descriptor(given.pop("descriptor"))
+        return replace(base, **given)
     except ValueError as exc:
         raise click.BadParameter(str(exc)) from None
 

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 
 DESCRIPTORS = ("cf", "cfhks")
+# The versions of each descriptor, the last one the default (docs/descriptors.md).
+VERSIONS = {"cf": (1,), "cfhks": (1, 2)}
 REPAIR_MODES = ("auto", "off", "proxy")
-# The length of the cfhks vector: QUANTILES + EIGENPAIRS + QUANTILES * len(TIMES) of `cfsig.cfhks`
+# The length of the cfhks vector per version, `cfsig.cfhks.DESIGNS[version].length`
 # (tests/test_cfhks.py checks that the two agree), here so that an index needs no SciPy.
-CFHKS_LENGTH = 64 + 30 + 64 * 4
+CFHKS_LENGTHS = {1: 64 + 30 + 64 * 4, 2: 64 + 30 + 64 * 8}
 SOLVERS = ("auto", "cholmod", "eigen", "scipy")  # sparse solver backends (`cfsig.conformal`)
 
 
@@ -27,6 +29,9 @@ class Params:
         paper's histogram of phi, to which every other attribute applies; ``"cfhks"``, the
         quantiles of phi, the low Laplace-Beltrami spectrum and heat kernel signatures, whose
         constants are fixed in `cfsig.cfhks` and which uses only ``mollify`` of the others.
+    version : int or None
+        The descriptor's version (one of ``VERSIONS[descriptor]``); None, the default, is its
+        latest. Stored with the rest, so an index keeps computing the version it was made with.
     bins : int
         Number of histogram bins (paper section 2.3: 200).
     low, high : float
@@ -58,6 +63,7 @@ class Params:
     normalize: bool = False
     mollify: float = 1e-5
     repair: str = "auto"
+    version: int | None = None
 
     def __post_init__(self) -> None:
         if self.bins < 1 or self.samples_per_face < 0 or not self.low < self.high:
@@ -72,6 +78,30 @@ class Params:
             raise ValueError(
                 f"unknown descriptor {self.descriptor!r}; choose from {', '.join(DESCRIPTORS)}"
             )
+        versions = VERSIONS[self.descriptor]
+        if self.version is None:
+            object.__setattr__(self, "version", versions[-1])  # frozen: set once, here
+        elif self.version not in versions:
+            raise ValueError(
+                f"{self.descriptor} has no version {self.version}; this cfsig computes "
+                f"{', '.join(map(str, versions))}"
+            )
+
+    def with_descriptor(self, descriptor: str) -> Params:
+        """The same parameters for ``descriptor``, at its latest version when it is another one.
+
+        Parameters
+        ----------
+        descriptor : str
+            One of `DESCRIPTORS`.
+
+        Returns
+        -------
+        params : Params
+        """
+        if descriptor == self.descriptor:
+            return self
+        return replace(self, descriptor=descriptor, version=None)
 
     @property
     def edges(self) -> tuple[float, float]:
@@ -87,10 +117,12 @@ class Params:
         """Parse what `to_json` wrote; unknown keys raise ``ValueError``.
 
         An index written before descriptors had names holds the paper's ``"cf"``, the default;
-        one written before the repair stage existed was made without it, ``repair="off"``.
+        one written before the repair stage existed was made without it, ``repair="off"``; one
+        written before descriptors had versions holds version 1.
         """
         data = json.loads(text)
         data.setdefault("repair", "off")
+        data.setdefault("version", 1)
         known = {f.name for f in fields(cls)}
         unknown = set(data) - known
         if unknown:
@@ -109,6 +141,9 @@ def signature_length(params: Params) -> int:
     Returns
     -------
     length : int
-        ``params.bins`` for ``cf``; the descriptor's fixed length otherwise.
+        ``params.bins`` for ``cf``; the fixed length of the version of ``cfhks`` otherwise.
     """
-    return params.bins if params.descriptor == "cf" else CFHKS_LENGTH
+    if params.descriptor == "cf":
+        return params.bins
+    assert params.version is not None  # resolved by Params.__post_init__
+    return CFHKS_LENGTHS[params.version]

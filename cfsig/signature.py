@@ -160,7 +160,8 @@ def signature_of(cf: ConformalFactor, faces: np.ndarray, params: Params) -> np.n
         ``cfhks`` only: the eigenvalue iteration failed.
     """
     if params.descriptor == "cfhks":
-        return cfhks_vector(cf)
+        assert params.version is not None  # resolved by Params.__post_init__
+        return cfhks_vector(cf, params.version)
     phi = cf.phi
     if params.normalize:
         span = np.ptp(phi)

@@ -7,9 +7,9 @@ from click.testing import CliRunner
 from cfsig import cfhks
 from cfsig.cli import main
 from cfsig.conformal import conformal_factor
-from cfsig.index import IndexReader
+from cfsig.index import IndexReader, IndexWriter
 from cfsig.mesh import clean_mesh
-from cfsig.params import Params, signature_length
+from cfsig.params import VERSIONS, Params, signature_length
 from cfsig.signature import compute_signature
 from tests.helpers import disk, icosphere, open_cylinder, random_rotation, torus, write_off
 
@@ -32,14 +32,30 @@ def test_weighted_quantiles():
     assert np.array_equal(q, [1.0, 2.0, 2.0, 3.0])
 
 
-def test_length_and_channels():
+@pytest.mark.parametrize("version", VERSIONS["cfhks"])
+def test_length_and_channels(version):
     v, f = _bumpy()
-    parts = cfhks.channels(conformal_factor(clean_mesh(v, f)))
+    design = cfhks.DESIGNS[version]
+    parts = cfhks.channels(conformal_factor(clean_mesh(v, f)), design.times)
     assert parts["phi"].shape == (cfhks.QUANTILES,)
     assert parts["spectrum"].shape == (cfhks.EIGENPAIRS,)
-    assert parts["heat"].shape == (len(cfhks.TIMES), cfhks.QUANTILES)
+    assert parts["heat"].shape == (len(design.times), cfhks.QUANTILES)
     assert np.all(np.diff(parts["spectrum"]) >= 0) and np.all(np.diff(parts["heat"]) >= 0)
-    assert _vector(v, f).shape == (cfhks.LENGTH,) == (signature_length(CFHKS),)
+    params = Params(descriptor="cfhks", version=version)
+    vector = compute_signature(clean_mesh(v, f), params).vector
+    assert vector.shape == (design.length,) == (signature_length(params),)
+    assert np.array_equal(vector, cfhks.weigh(parts, design))
+
+
+def test_versions():
+    assert CFHKS.version == max(VERSIONS["cfhks"]) and Params().version == 1
+    with pytest.raises(ValueError, match="cf has no version 2"):
+        Params(descriptor="cf", version=2)
+    old = json.loads(Params(descriptor="cfhks", version=1).to_json())
+    del old["version"]  # an index written before descriptors had versions
+    assert Params.from_json(json.dumps(old)).version == 1
+    assert Params().with_descriptor("cfhks") == CFHKS
+    assert Params.from_json(json.dumps(old)).with_descriptor("cfhks").version == 1
 
 
 def test_invariant_to_rigid_motion_and_scale():
@@ -69,7 +85,7 @@ def test_distance_separates_shapes():
 )
 def test_open_and_tiny_meshes_give_finite_vectors(mesh):
     vector = _vector(*mesh)
-    assert vector.shape == (cfhks.LENGTH,) and np.all(np.isfinite(vector))
+    assert vector.shape == (signature_length(CFHKS),) and np.all(np.isfinite(vector))
 
 
 def test_params_name_the_descriptor():
@@ -99,13 +115,32 @@ def test_index_and_query_use_the_index_descriptor(collection, tmp_path):
     assert result.exit_code == 0, result.output
     with IndexReader(index) as reader:
         assert reader.params.descriptor == "cfhks"
-        assert reader.signatures.shape == (4, cfhks.LENGTH)
+        assert reader.params == CFHKS
+        assert reader.signatures.shape == (4, signature_length(CFHKS))
     query = str(collection / "bump" / "1.off")
     result = runner.invoke(main, ["query", str(index), query, "-k", "2", "--json"])
     assert result.exit_code == 0, result.output
     hits = json.loads(result.stdout)
     assert hits[0]["name"] == "bump/1.off" and hits[0]["distance"] < 1e-5
     assert hits[1]["label"] == "bump"
+
+
+def test_an_index_of_an_older_version_answers_with_its_own(collection, tmp_path):
+    old = Params(descriptor="cfhks", version=1)
+    index = tmp_path / "old.h5"
+    with IndexWriter(index, old):
+        pass  # an empty index of version 1; indexing into it keeps its version
+    runner = CliRunner()
+    result = runner.invoke(main, ["index", str(collection), "-o", str(index), "--jobs", "1"])
+    assert result.exit_code == 0, result.output
+    with IndexReader(index) as reader:
+        assert reader.params == old
+        assert reader.signatures.shape == (4, signature_length(old))
+    query = collection / "ring" / "0.off"
+    result = runner.invoke(main, ["query", str(index), str(query), "-k", "1", "--json"])
+    assert result.exit_code == 0, result.output
+    hit = json.loads(result.stdout)[0]
+    assert hit["name"] == "ring/0.off" and hit["distance"] < 1e-5
 
 
 def test_evaluate_side_by_side(collection):
