@@ -1,347 +1,402 @@
-"""Descriptors on SHREC 2007: the study behind ``cfhks`` and its comparison with the paper's CF.
+"""The descriptors on SHREC 2007, McGill and FAUST in one run: cf, cfhks 1, cfhks 2, ShapeDNA.
 
-Stages (run in this order; each prints Markdown for docs/descriptors.md):
+Stages (each prints Markdown for docs/descriptors.md; run from the repository root):
 
-    python benchmarks/descriptors.py channels   # per-mesh channels of every variant -> cache
-    python benchmarks/descriptors.py cost       # CPU time of k eigenpairs against the CF
-    python benchmarks/descriptors.py study      # variants, ablations, leave-one-class-out CV
-    python benchmarks/descriptors.py scales     # label-free channel medians (cfhks.SCALES)
-    python benchmarks/descriptors.py compare    # cf vs cfhks from the library: measures, time
+    python benchmarks/descriptors.py measure    # every descriptor of every mesh, CPU timed -> cache
+    python benchmarks/descriptors.py study      # how version 2 was chosen: leave one collection out
+    python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all four
+    python benchmarks/descriptors.py cost       # whole `cfsig index` runs: default, cf, ShapeDNA
+    python benchmarks/descriptors.py coarse     # version 2 on simplified copies: cheaper, worse?
 
-``channels`` computes, once per mesh, the conformal factor, 50 Laplace-Beltrami eigenpairs and
-from them every channel variant the study compares, and caches them in a .npz file (under /tmp
-by default; never commit it). ``study`` and ``scales`` only read that cache. ``compare``
-computes both descriptors with the library, mesh by mesh in one process, alternating which goes
-first, and times each (CPU seconds of the process, reading the file included).
+``measure`` computes, for every mesh of the three collections (``--data-root``, where
+``../shared/data/unpack`` puts them), four descriptors from the file, each timed in CPU seconds
+of its worker process with one BLAS thread, reading included: ``cf`` (the paper's), ``cfhks``
+versions 1 and 2 (`cfsig.cfhks.DESIGNS`) and ShapeDNA (lapy, the 50 smallest nonzero
+eigenvalues times the area divided by their index, compared by L2, as in the issue's table). It
+also keeps the unweighted channels of version 2 (phi, the spectrum, heat at eight times), from
+which ``study`` builds every candidate weighting. Caches go under ``--cache`` (never commit).
+
+``study`` chooses the channel weights and heat times over a small grid, each candidate's
+channel divisors being the medians of its channel distances averaged over the training
+collections (label-free), by the mean first tier (FT) on the training collections: once for each
+collection left out, reporting the left-out one, then on SHREC 2007 and McGill, which gives
+version 2 (FAUST is held out).
+
+``cost`` times whole processes, alternating, three rounds, medians: ``cfsig index`` with one job
+on every 10th SHREC 2007 mesh (40) with the default descriptor and with ``--descriptor cf``,
+ShapeDNA on the same files in one process (this script's ``shapedna`` stage), and ``cfsig
+index`` with two jobs on all 400 for both descriptors.
+
+``coarse`` measures the first candidate of the issue for a cheaper spectrum: version 2 computed
+on a copy of each mesh simplified by fast-simplification to ``--vertices`` vertices (meshes
+already that small are used as they are), its FT and CPU seconds per mesh against version 2 on
+the full mesh from the same run's cache.
 """
 
 from __future__ import annotations
 
-import argparse
-import collections
 import os
+
+os.environ.update(
+    dict.fromkeys(["OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"], "1")
+)
+
+import argparse
+import contextlib
+import io
+import itertools
+import shutil
+import subprocess
 import sys
+import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ[_var] = "1"
+import numpy as np
 
-import numpy as np  # noqa: E402
+from cfsig import cfhks
+from cfsig.conformal import conformal_factor
+from cfsig.measures import RetrievalReport, evaluate_distances
+from cfsig.mesh import read_mesh
+from cfsig.params import Params
+from cfsig.repair import repair_mesh
+from cfsig.signature import signature_file
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from cfsig import cfhks  # noqa: E402
-from cfsig.conformal import conformal_factor  # noqa: E402
-from cfsig.measures import evaluate_distances  # noqa: E402
-from cfsig.mesh import read_mesh  # noqa: E402
-from cfsig.nearest import l1_distances  # noqa: E402
-from cfsig.params import Params  # noqa: E402
-from cfsig.signature import sample_phi, signature_file, signature_of  # noqa: E402
-from cfsig.spectrum import heat_kernel_signature, laplace_spectrum  # noqa: E402
-
-DATA = ROOT.parent / "shared" / "data" / "shrec07"
-CACHE = Path("/tmp/cfsig-descriptor-channels.npz")
-MAX_PAIRS = 50
-PAIRS = (20, 30, 50)
-AFFORDABLE = (20, 30)  # eigenpairs within the 5x time budget (the `cost` stage measures it)
-TAUS = 0.0025 * 2.0 ** np.arange(10)  # diffusion times / area
-Q = cfhks.QUANTILES
-
-
-def _paths(data: Path) -> list[Path]:
-    """SHREC 2007's meshes in the order of their numbers."""
-    return sorted(data.glob("*/*.off"), key=lambda p: int(p.stem))
+DATA_ROOT = ROOT.parent / "shared" / "data"
+CACHE = Path(tempfile.gettempdir()) / "cfsig-descriptors"
+COLLECTIONS = ("shrec07", "mcgill", "faust")
+CHOSEN_ON = ("shrec07", "mcgill")
+SHAPEDNA_EIGENVALUES = 50
+DESCRIPTORS = {
+    "cf": Params(),
+    "cfhks 1": Params(descriptor="cfhks", version=1),
+    "cfhks 2": Params(descriptor="cfhks", version=2),
+}
+NAMES = (*DESCRIPTORS, "ShapeDNA")
+V2 = cfhks.DESIGNS[2]
+# The grid of `study`: heat times as slices of version 2's eight, and channel weights.
+TIME_SETS = {"all 8": slice(0, 8), "version 1's 4": slice(1, 5), "middle 4": slice(2, 6),
+             "first 4": slice(0, 4), "last 4": slice(4, 8)}  # fmt: skip
+PHI_WEIGHTS = (0.0, 0.5, 1.0)
+HEAT_WEIGHTS = (1.0, 2.0, 3.0)
 
 
-def _channels_of(path: Path) -> dict[str, np.ndarray]:
-    """Every channel variant of one mesh."""
-    mesh = read_mesh(path)
-    cf = conformal_factor(mesh, Params().mollify)
-    out = {"cf": signature_of(cf, mesh.faces, Params())}
-    samples = sample_phi(mesh.faces, cf.operators.face_areas, cf.phi, 5 * len(mesh.faces), 0)
-    out["phi_sampled"] = np.quantile(np.concatenate([samples, cf.phi]), (np.arange(Q) + 0.5) / Q)
-    area = cf.operators.vertex_area.sum()
-    weights = cf.operators.vertex_area / area
-    out["phi"] = cfhks.weighted_quantiles(cf.phi, weights, Q)
-    lo, hi = cf.phi.min(), cf.phi.max()
-    out["phi_unit"] = cfhks.weighted_quantiles((cf.phi - lo) / (hi - lo), weights, Q)
-    full = laplace_spectrum(
-        cf.operators.laplacian, cf.operators.vertex_area, cf.operators.labels, cf.solve, MAX_PAIRS
-    )
-    out["spectrum"] = np.log(full.eigenvalues * area)
-    for k in PAIRS:
-        part = type(full)(
-            full.eigenvalues[:k], full.eigenvectors[:, :k], full.vertex_area, full.labels
-        )
-        hks = heat_kernel_signature(part, TAUS * area)
-        out[f"heat{k}"] = np.array(
-            [cfhks.weighted_quantiles(np.log(area * h), weights, Q) for h in hks.T]
-        )
-    return out
+def shapedna(path: Path) -> np.ndarray:
+    """ShapeDNA of a mesh file: lapy's 50 smallest nonzero eigenvalues x area / index.
+
+    Read by lapy; a mesh whose degenerate triangles make lapy's values NaN is read by cfsig,
+    which drops them, and given to lapy again.
+    """
+    from lapy import Solver, TriaMesh
+
+    with contextlib.redirect_stdout(io.StringIO()), np.errstate(invalid="ignore"):
+        mesh = TriaMesh.read_off(str(path))
+        values = Solver(mesh).eigs(k=SHAPEDNA_EIGENVALUES + 1, rng=0)[0][1:] * mesh.area()
+        if not np.all(np.isfinite(values)):
+            checked = read_mesh(path)
+            mesh = TriaMesh(checked.vertices, checked.faces)
+            values = Solver(mesh).eigs(k=SHAPEDNA_EIGENVALUES + 1, rng=0)[0][1:] * mesh.area()
+    return values / np.arange(1, SHAPEDNA_EIGENVALUES + 1)
 
 
-def channels(args: argparse.Namespace) -> None:
-    """Compute and cache every channel variant of every mesh."""
-    paths = _paths(args.data)
-    with ProcessPoolExecutor(args.jobs) as pool:
-        rows = list(pool.map(_channels_of, paths, chunksize=4))
-    arrays = {key: np.array([row[key] for row in rows]) for key in rows[0]}
-    np.savez(args.cache, labels=[p.parent.name for p in paths], **arrays)
-    print(f"{len(paths)} meshes -> {args.cache}")
+def _measure_one(path: Path) -> dict:
+    """Every descriptor of one mesh with its CPU seconds, and version 2's raw channels."""
+    row: dict = {}
+    for name, params in DESCRIPTORS.items():
+        start = time.process_time()
+        row[name] = signature_file(path, params).vector
+        row[f"{name} s"] = time.process_time() - start
+    start = time.process_time()
+    row["ShapeDNA"] = shapedna(path)
+    row["ShapeDNA s"] = time.process_time() - start
+    cf = conformal_factor(repair_mesh(read_mesh(path)), Params().mollify)
+    row.update(cfhks.channels(cf, V2.times))
+    return row
 
 
-def _w1(x: np.ndarray) -> np.ndarray:
-    """All-pairs mean absolute difference of rows (the 1-Wasserstein distance of quantiles)."""
-    return np.abs(x[:, None, :] - x[None, :, :]).mean(axis=-1)
+def _paths(data_root: Path, name: str) -> list[Path]:
+    """The OFF files of one collection, in sorted order."""
+    paths = sorted((data_root / name).glob("*/*.off"))
+    if not paths:
+        sys.exit(f"no meshes under {data_root / name}: ../shared/data/unpack {name}")
+    return paths
 
 
-def _by_median(d: np.ndarray) -> np.ndarray:
-    """A distance matrix divided by its median over all pairs (no labels involved)."""
-    return d / np.median(d[np.triu_indices(len(d), 1)])
+def measure(args: argparse.Namespace) -> None:
+    """Compute and cache every descriptor of every mesh of the three collections."""
+    args.cache.mkdir(parents=True, exist_ok=True)
+    for name in COLLECTIONS:
+        paths = _paths(args.data_root, name)
+        with ProcessPoolExecutor(args.jobs) as pool:
+            rows = list(pool.map(_measure_one, paths, chunksize=2))
+        arrays = {key: np.array([row[key] for row in rows]) for key in rows[0]}
+        np.savez(args.cache / f"{name}.npz", labels=[p.parent.name for p in paths], **arrays)
+        print(f"{name}: {len(paths)} meshes -> {args.cache / name}.npz", flush=True)
 
 
-class _Study:
-    """Distance matrices of the cached channels."""
+def _load(cache: Path) -> dict[str, dict[str, np.ndarray]]:
+    """The cached arrays of each collection."""
+    if not all((cache / f"{c}.npz").exists() for c in COLLECTIONS):
+        sys.exit(f"no cache under {cache}: run the measure stage first")
+    return {c: dict(np.load(cache / f"{c}.npz")) for c in COLLECTIONS}
 
-    def __init__(self, cache: Path) -> None:
-        z = np.load(cache)
-        self.labels = [str(s) for s in z["labels"]]
-        self.z = z
-        self.memo: dict[str, np.ndarray] = {}
 
-    def channel(self, name: str) -> np.ndarray:
-        """A median-normalised channel distance: ``phi``, ``spectrumK``, ``heatK_J``..."""
-        if name not in self.memo:
-            if name.startswith("spectrum"):
-                d = _w1(self.z["spectrum"][:, : int(name[8:])])
-            elif name.startswith("heat"):
-                k, j = name[4:].split("_")
-                d = _w1(self.z[f"heat{k}"][:, int(j)])
-            elif name == "cf":
-                d = l1_distances(self.z["cf"], self.z["cf"])
-            else:
-                d = _w1(self.z[name])
-            self.memo[name] = _by_median(d)
-        return self.memo[name]
+def _pairwise(x: np.ndarray, order: int = 1) -> np.ndarray:
+    """All-pairs L1 (order 1, as a mean over entries) or L2 (order 2) distances of rows."""
+    x = x.reshape(len(x), -1)
+    diff = x[:, None, :] - x[None, :, :]
+    return np.abs(diff).mean(axis=-1) if order == 1 else np.sqrt((diff**2).sum(axis=-1))
 
-    def heat(self, k: int, first: int, count: int) -> np.ndarray:
-        """The heat channel: per-time distances, each by its median, summed, by the median."""
-        return _by_median(sum(self.channel(f"heat{k}_{j}") for j in range(first, first + count)))
 
-    def combined(self, k: int, first: int, count: int, parts=("phi", "spectrum", "heat")):
-        """Equal-weight sum of median-normalised channels."""
-        terms = {
-            "phi": lambda: self.channel("phi"),
-            "spectrum": lambda: self.channel(f"spectrum{k}"),
-            "heat": lambda: self.heat(k, first, count),
+def _median(d: np.ndarray) -> float:
+    """Median over the distinct pairs."""
+    return float(np.median(d[np.triu_indices(len(d), 1)]))
+
+
+def _report(d: np.ndarray, labels: np.ndarray) -> RetrievalReport:
+    """Leave-one-out retrieval measures of a distance matrix."""
+    return evaluate_distances(d, [str(label) for label in labels])
+
+
+class Channels:
+    """The channel distances of version 2's raw channels, per collection, computed once."""
+
+    def __init__(self, data: dict[str, dict[str, np.ndarray]]) -> None:
+        self.data = data
+        self._cache: dict[tuple[str, str], np.ndarray] = {}
+
+    def distance(self, collection: str, channel: str) -> np.ndarray:
+        """One channel's all-pairs distance: ``phi``, ``spectrum`` or a key of TIME_SETS."""
+        key = (collection, channel)
+        if key not in self._cache:
+            arrays = self.data[collection]
+            x = arrays["heat"][:, TIME_SETS[channel]] if channel in TIME_SETS else arrays[channel]
+            self._cache[key] = _pairwise(x)
+        return self._cache[key]
+
+    def combined(self, collection: str, weights: dict[str, float], train: tuple[str, ...]):
+        """Weighted sum of channel distances, each divided by its median over ``train``."""
+        total = np.zeros((len(self.data[collection]["labels"]),) * 2)
+        for channel, weight in weights.items():
+            if weight:
+                scale = np.mean([_median(self.distance(t, channel)) for t in train])
+                total += weight * self.distance(collection, channel) / scale
+        return total
+
+    def first_tier(self, weights: dict[str, float], train: tuple[str, ...]) -> dict[str, float]:
+        """FT of every collection with these weights and divisors from ``train``."""
+        return {
+            c: _report(self.combined(c, weights, train), self.data[c]["labels"]).measures["FT"]
+            for c in self.data
         }
-        return sum(terms[p]() for p in parts)
 
 
-def _row(name: str, report, seconds: str = "") -> str:
-    """One Markdown table row of measures."""
-    m = report.measures
-    return f"| {name} | {m['NN']:.3f} | {m['FT']:.3f} | {m['ST']:.3f} | {m['mAP']:.3f} |{seconds}"
+def _grid() -> list[dict[str, float]]:
+    """Every candidate of the study: phi and heat weights, heat times; spectrum weight 1."""
+    return [
+        {"phi": phi, "spectrum": 1.0, times: heat}
+        for times, phi, heat in itertools.product(TIME_SETS, PHI_WEIGHTS, HEAT_WEIGHTS)
+    ]
+
+
+def _choose(
+    channels: Channels, train: tuple[str, ...], phi: float | None = None
+) -> tuple[dict, dict[str, float]]:
+    """The candidate with the best mean FT over ``train`` (of those with this weight of phi,
+    if given), and its FT on every collection."""
+    grid = [w for w in _grid() if phi is None or w["phi"] == phi]
+    scored = [(w, channels.first_tier(w, train)) for w in grid]
+    return max(scored, key=lambda item: np.mean([item[1][c] for c in train]))
+
+
+def _describe(weights: dict[str, float]) -> str:
+    """A candidate in words."""
+    times = next(k for k in weights if k in TIME_SETS)
+    return f"phi {weights['phi']:g}, spectrum 1, heat {weights[times]:g} ({times} times)"
 
 
 def study(args: argparse.Namespace) -> None:
-    """Single channels, ablations, the (k, times) grid and leave-one-class-out selection."""
-    s = _Study(args.cache)
-    labels = s.labels
-    print("| channel (distance) | NN | FT | ST | mAP |\n|---|---|---|---|---|")
-    singles = ["cf", "phi_sampled", "phi", "phi_unit", *[f"spectrum{k}" for k in (10, *PAIRS)]]
-    for name in singles:
-        print(_row(name, evaluate_distances(s.channel(name), labels)))
-    for k in (20, 50):
-        for j, tau in enumerate(TAUS):
-            report = evaluate_distances(s.channel(f"heat{k}_{j}"), labels)
-            print(_row(f"heat{k} tau={tau:g}", report))
-    k, first, count = cfhks.EIGENPAIRS, _time_index(cfhks.TIMES[0]), len(cfhks.TIMES)
-    print("\n| ablation of cfhks | NN | FT | ST | mAP |\n|---|---|---|---|---|")
-    ablations = [
-        ("phi", "spectrum", "heat"),
-        ("spectrum", "heat"),
-        ("phi", "heat"),
-        ("phi", "spectrum"),
-        ("heat",),
-    ]
-    for parts in ablations:
-        report = evaluate_distances(s.combined(k, first, count, parts), labels)
-        print(_row(" + ".join(parts), report))
-    print(
-        "\n| weight of one cfhks channel (others 1) | NN | FT | ST | mAP |\n|---|---|---|---|---|"
-    )
-    parts = {
-        "phi": s.channel("phi"),
-        "spectrum": s.channel(f"spectrum{k}"),
-        "heat": s.heat(k, first, count),
-    }
-    for name in parts:
-        for weight in (0.5, 2.0):
-            d = sum(m * (weight if n == name else 1.0) for n, m in parts.items())
-            print(_row(f"{name} x{weight:g}", evaluate_distances(d, labels)))
-    grid = {
-        (k, f, c): s.combined(k, f, c)
-        for k in PAIRS
-        for f in range(6)
-        for c in range(1, 7)
-        if f + c <= len(TAUS)
-    }
-    reports = {key: evaluate_distances(d, labels) for key, d in grid.items()}
-    print("\nNN / FT / mAP of phi + spectrum + heat by eigenpairs k, first time, number of times")
-    print("\n| k | first tau | " + " | ".join(f"{c} times" for c in range(1, 7)) + " |")
-    print("|---" * 8 + "|")
-    for k in PAIRS:
-        for f in range(6):
-            cells = [
-                reports[(k, f, c)].measures if (k, f, c) in reports else None for c in range(1, 7)
-            ]
-            text = " | ".join(
-                f"{m['NN']:.3f} / {m['FT']:.3f} / {m['mAP']:.3f}" if m else "" for m in cells
-            )
-            print(f"| {k} | {TAUS[f]:g} | {text} |")
-    affordable = {key: d for key, d in grid.items() if key[0] in AFFORDABLE}
-    _leave_one_class_out(affordable, reports, labels)
+    """Leave-one-collection-out choice of version 2's weights, then the choice itself."""
+    data = _load(args.cache)
+    channels = Channels(data)
+    print("Medians of the channel distances over all pairs (label-free):\n")
+    print("| collection | phi | spectrum | heat, all 8 times |\n|---|---|---|---|")
+    for c in COLLECTIONS:
+        meds = [_median(channels.distance(c, ch)) for ch in ("phi", "spectrum", "all 8")]
+        print(f"| {c} | " + " | ".join(f"{m:.4f}" for m in meds) + " |")
+    print("\nLeave one collection out: chosen on the other two, FT on each.\n")
+    print("| left out | chosen | " + " | ".join(COLLECTIONS) + " |\n|---|---|" + "---|" * 3)
+    for left_out in COLLECTIONS:
+        train = tuple(c for c in COLLECTIONS if c != left_out)
+        weights, ft = _choose(channels, train)
+        cells = [f"**{ft[c]:.3f}**" if c == left_out else f"{ft[c]:.3f}" for c in COLLECTIONS]
+        print(f"| {left_out} | {_describe(weights)} | " + " | ".join(cells) + " |")
+    print(f"\nThe best candidate on {' and '.join(CHOSEN_ON)} for each weight of phi:\n")
+    print("| weight of phi | candidate | mean FT of the two | " + " | ".join(COLLECTIONS) + " |")
+    print("|---|---|---|" + "---|" * 3)
+    for phi in PHI_WEIGHTS:
+        weights, ft = _choose(channels, CHOSEN_ON, phi)
+        mean = np.mean([ft[c] for c in CHOSEN_ON])
+        cells = " | ".join(f"{ft[c]:.3f}" for c in COLLECTIONS)
+        print(f"| {phi:g} | {_describe(weights)} | {mean:.4f} | {cells} |")
+    weights, ft = _choose(channels, CHOSEN_ON)
+    print(f"\nChosen on {' and '.join(CHOSEN_ON)} (version 2): {_describe(weights)}")
+    print("FT: " + ", ".join(f"{c} {ft[c]:.3f}" for c in COLLECTIONS))
+    for channel in ("phi", "spectrum", "all 8"):
+        divisor = np.mean([_median(channels.distance(t, channel)) for t in CHOSEN_ON])
+        print(f"- {channel}: median distance averaged over {', '.join(CHOSEN_ON)} {divisor:.4f}")
 
 
-def _time_index(tau: float) -> int:
-    """Index of a diffusion time in the study's grid."""
-    return int(np.argmin(np.abs(TAUS - tau)))
-
-
-def _leave_one_class_out(grid: dict, reports: dict, labels: list[str]) -> None:
-    """Choose (k, first, count) by mAP on 19 classes, score the 20th; print the estimate."""
-    labels_arr = np.asarray(labels)
-    held, chosen = collections.defaultdict(list), []
-    for cls in sorted(set(labels)):
-        rest = np.flatnonzero(labels_arr != cls)
-        sub = [labels[i] for i in rest]
-        best = max(
-            grid,
-            key=lambda key: evaluate_distances(grid[key][np.ix_(rest, rest)], sub).measures["mAP"],
-        )
-        chosen.append(best)
-        for m, v in reports[best].per_class[cls].items():
-            held[m].append(v)
-    estimate = {m: float(np.mean(v)) for m, v in held.items()}
-    print("\nleave-one-class-out: configuration chosen by mAP on the other 19 classes, scored on")
-    scores = ", ".join(f"{m} {estimate[m]:.3f}" for m in ("NN", "FT", "ST", "mAP"))
-    print(f"the held-out class's queries: {scores}")
-    for (k, f, c), n in collections.Counter(chosen).most_common():
-        print(f"- k={k}, first tau={TAUS[f]:g}, {c} time(s): chosen in {n} fold(s)")
-    k, f, c = max(grid, key=lambda key: reports[key].measures["mAP"])
-    print(f"\nchosen on all 20 classes (cfhks): k={k}, first tau={TAUS[f]:g}, {c} time(s)")
-
-
-def cost(args: argparse.Namespace) -> None:
-    """CPU seconds of the paper's CF and of k eigenpairs, on every tenth mesh, in one process."""
-    times = collections.defaultdict(list)
-    for path in _paths(args.data)[::10]:
-        start = time.process_time()
-        mesh = read_mesh(path)
-        cf = conformal_factor(mesh, Params().mollify)
-        signature_of(cf, mesh.faces, Params())
-        times["cf"].append(time.process_time() - start)
-        for k in PAIRS:
-            start = time.process_time()
-            laplace_spectrum(
-                cf.operators.laplacian, cf.operators.vertex_area, cf.operators.labels, cf.solve, k
-            )
-            times[k].append(time.process_time() - start)
-    base = np.array(times["cf"])
-    print(f"{len(base)} meshes; CF (reading, solve, histogram): median {np.median(base):.4f} s")
-    print("\n| eigenpairs k | median s | median of (CF + eigenpairs) / CF |\n|---|---|---|")
-    for k in PAIRS:
-        t = np.array(times[k])
-        print(f"| {k} | {np.median(t):.4f} | {np.median((base + t) / base):.2f} |")
-
-
-def scales(args: argparse.Namespace) -> None:
-    """Median distance of each cfhks channel over all pairs (labels unused)."""
-    s = _Study(args.cache)
-    z = s.z
-    k = cfhks.EIGENPAIRS
-    idx = [_time_index(t) for t in cfhks.TIMES]
-    iu = np.triu_indices(len(s.labels), 1)
-    heat = [_w1(z[f"heat{k}"][:, j]) for j in idx]
-    heat_sum = sum(d / np.median(d[iu]) for d in heat)
-    found = {
-        "phi": np.median(_w1(z["phi"])[iu]),
-        "spectrum": np.median(_w1(z["spectrum"][:, :k])[iu]),
-        "heat": tuple(float(np.median(d[iu])) for d in heat),
-        "heat_sum": np.median(heat_sum[iu]),
-    }
-    print("SCALES = {" + ", ".join(f'"{key}": {_fmt(v)}' for key, v in found.items()) + "}")
-
-
-def _fmt(value) -> str:
-    """Four significant digits, tuples kept."""
-    if isinstance(value, tuple):
-        return "(" + ", ".join(f"{v:.4g}" for v in value) + ")"
-    return f"{float(value):.4g}"
+def _distances(name: str, vectors: np.ndarray) -> np.ndarray:
+    """A descriptor's all-pairs distance: L2 for ShapeDNA, L1 (the index's) otherwise."""
+    return _pairwise(vectors, order=2 if name == "ShapeDNA" else 1)
 
 
 def compare(args: argparse.Namespace) -> None:
-    """Both descriptors by the library, timed mesh by mesh in one process."""
-    paths = _paths(args.data)
-    names = ("cf", "cfhks")
-    params = {n: Params(descriptor=n) for n in names}
-    vectors = {n: [] for n in names}
-    seconds = {n: [] for n in names}
-    for i, path in enumerate(paths):
-        for n in names if i % 2 == 0 else names[::-1]:
-            start = time.process_time()
-            vectors[n].append(signature_file(path, params[n], args.solver).vector)
-            seconds[n].append(time.process_time() - start)
-    labels = [p.parent.name for p in paths]
-    reports = {}
-    for n in names:
-        v = np.array(vectors[n])
-        reports[n] = evaluate_distances(l1_distances(v, v), labels)
-    median = {n: float(np.median(seconds[n])) for n in names}
-    ratio = np.median(np.array(seconds["cfhks"]) / np.array(seconds["cf"]))
-    print(f"CPU seconds per mesh, reading included, {len(paths)} meshes, solver {args.solver}:")
-    print(
-        f"median cf {median['cf']:.4f} s, cfhks {median['cfhks']:.4f} s; ratio of medians "
-        f"{median['cfhks'] / median['cf']:.2f}, median of per-mesh ratios {ratio:.2f}\n"
-    )
-    print("| descriptor | NN | FT | ST | mAP | CPU s per mesh (median) |")
-    print("|---|---|---|---|---|---|")
-    for n in names:
-        print(_row(n, reports[n], f" {median[n]:.3f} |"))
-    print("\n| class | cf FT | cfhks FT | difference |\n|---|---|---|---|")
-    worst = np.inf
-    for cls in sorted(reports["cf"].per_class):
-        a, b = reports["cf"].per_class[cls]["FT"], reports["cfhks"].per_class[cls]["FT"]
-        worst = min(worst, b - a)
-        print(f"| {cls} | {a:.3f} | {b:.3f} | {b - a:+.3f} |")
-    m = reports["cfhks"].measures
+    """Measures and CPU seconds per mesh of all four descriptors on the three collections."""
+    data = _load(args.cache)
+    print("| collection | descriptor | NN | FT | ST | mAP | CPU s per mesh (median) |")
+    print("|---|---|---|---|---|---|---|")
+    ft: dict[tuple[str, str], float] = {}
+    for c in COLLECTIONS:
+        for name in NAMES:
+            m = _report(_distances(name, data[c][name]), data[c]["labels"]).measures
+            ft[c, name] = m["FT"]
+            cells = [f"{m[k]:.3f}" for k in ("NN", "FT", "ST", "mAP")]
+            print(
+                f"| {c} | {name} | "
+                + " | ".join(cells)
+                + f" | {np.median(data[c][name + ' s']):.3f} |"
+            )
+    shrec = _report(_distances("cfhks 2", data["shrec07"]["cfhks 2"]), data["shrec07"]["labels"])
     checks = {
-        "FT >= 0.56": m["FT"] >= 0.56,
-        "NN >= 0.88": m["NN"] >= 0.88,
-        "mAP >= 0.61": m["mAP"] >= 0.61,
-        "median time <= 5x cf": median["cfhks"] <= 5 * median["cf"],
-        "no class FT more than 0.05 below cf": worst >= -0.05,
+        f"{c}: FT >= ShapeDNA's + 0.02": ft[c, "cfhks 2"] >= ft[c, "ShapeDNA"] + 0.02
+        for c in COLLECTIONS
     }
-    print("\n" + "\n".join(f"- {k}: {'yes' if v else 'NO'}" for k, v in checks.items()))
+    checks["shrec07: NN >= 0.90"] = shrec.measures["NN"] >= 0.90
+    checks["shrec07: FT >= 0.60"] = shrec.measures["FT"] >= 0.60
+    print("\nThe issue's quality bars, for the default (cfhks 2):\n")
+    print("\n".join(f"- {k}: {'yes' if v else 'NO'}" for k, v in checks.items()))
+
+
+def _cfsig_index(folder: Path, descriptor: str | None, jobs: int) -> float:
+    """Wall seconds of one whole ``cfsig index`` process into a new index."""
+    with tempfile.TemporaryDirectory() as tmp:
+        command = [str(Path(sys.executable).with_name("cfsig")), "index", str(folder), "-o",
+                   f"{tmp}/i.h5", "--jobs", str(jobs)]  # fmt: skip
+        if descriptor:
+            command += ["--descriptor", descriptor]
+        start = time.perf_counter()
+        subprocess.run(command, check=True, capture_output=True)
+        return time.perf_counter() - start
+
+
+def _shapedna_process(files: list[Path]) -> float:
+    """Wall seconds of one whole process computing ShapeDNA of ``files``."""
+    start = time.perf_counter()
+    command = [sys.executable, __file__, "shapedna", *map(str, files)]
+    subprocess.run(command, check=True, capture_output=True)
+    return time.perf_counter() - start
+
+
+def cost(args: argparse.Namespace) -> None:
+    """Whole-process times of indexing with the default, with cf, and of ShapeDNA."""
+    paths = sorted(_paths(args.data_root, "shrec07"), key=lambda p: int(p.stem))
+    subset = paths[:: args.every]
+    runs: dict[str, list[float]] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "subset"
+        for path in subset:
+            (folder / path.parent.name).mkdir(parents=True, exist_ok=True)
+            shutil.copy(path, folder / path.parent.name / path.name)
+        for round_ in range(args.rounds):
+            timings = {
+                "default, 1 job": lambda: _cfsig_index(folder, None, 1),
+                "cf, 1 job": lambda: _cfsig_index(folder, "cf", 1),
+                "ShapeDNA, 1 process": lambda: _shapedna_process(subset),
+                "default, all, 2 jobs": lambda: _cfsig_index(args.data_root / "shrec07", None, 2),
+                "cf, all, 2 jobs": lambda: _cfsig_index(args.data_root / "shrec07", "cf", 2),
+            }
+            order = list(timings) if round_ % 2 == 0 else list(timings)[::-1]
+            for name in order:
+                runs.setdefault(name, []).append(timings[name]())
+            print(
+                f"round {round_ + 1}: " + ", ".join(f"{k} {v[-1]:.2f} s" for k, v in runs.items()),
+                flush=True,
+            )
+    med = {name: float(np.median(v)) for name, v in runs.items()}
+    print(f"\nMedians of {args.rounds} rounds, wall seconds ({len(subset)} meshes unless 'all'):\n")
+    print("| run | seconds |\n|---|---|")
+    print("\n".join(f"| {name} | {s:.2f} |" for name, s in med.items()))
+    default, cf, dna = med["default, 1 job"], med["cf, 1 job"], med["ShapeDNA, 1 process"]
+    print(f"\ndefault / cf: {default / cf:.2f}; ShapeDNA / default: {dna / default:.2f}")
+    checks = {
+        "default <= 1.5x cf (40 meshes, 1 job)": default <= 1.5 * cf,
+        "ShapeDNA >= 6x default": dna >= 6 * default,
+        "all 400 with 2 jobs <= 20 s": med["default, all, 2 jobs"] <= 20,
+    }
+    print("\n".join(f"- {k}: {'yes' if v else 'NO'}" for k, v in checks.items()))
+
+
+def _coarse_one(item: tuple[Path, int]) -> tuple[np.ndarray, float]:
+    """Version 2 of one mesh simplified to at most ``vertices`` vertices, and its CPU seconds."""
+    import fast_simplification
+
+    from cfsig.mesh import clean_mesh
+
+    path, vertices = item
+    start = time.process_time()
+    mesh = repair_mesh(read_mesh(path))
+    if len(mesh.vertices) > vertices:
+        reduction = 1 - vertices / len(mesh.vertices)
+        mesh = clean_mesh(*fast_simplification.simplify(mesh.vertices, mesh.faces, reduction))
+    cf = conformal_factor(mesh, Params().mollify)
+    vector = cfhks.weigh(cfhks.channels(cf, V2.times), V2)
+    return vector, time.process_time() - start
+
+
+def coarse(args: argparse.Namespace) -> None:
+    """FT and CPU seconds of version 2 on simplified copies against the full meshes."""
+    data = _load(args.cache)
+    print("| collection | vertices | FT | CPU s per mesh (median) |\n|---|---|---|---|")
+    for c in ("shrec07", "faust"):
+        full = _report(_distances("cfhks 2", data[c]["cfhks 2"]), data[c]["labels"])
+        print(f"| {c} | all | {full.measures['FT']:.3f} | {np.median(data[c]['cfhks 2 s']):.3f} |")
+        for vertices in args.vertices:
+            items = [(path, vertices) for path in _paths(args.data_root, c)]
+            with ProcessPoolExecutor(args.jobs) as pool:
+                rows = list(pool.map(_coarse_one, items, chunksize=2))
+            vectors = np.array([vector for vector, _ in rows])
+            ft = _report(_distances("cfhks 2", vectors), data[c]["labels"]).measures["FT"]
+            seconds = np.median([s for _, s in rows])
+            print(f"| {c} | {vertices} | {ft:.3f} | {seconds:.3f} |", flush=True)
 
 
 def main() -> None:
     """Parse the command line and run one stage."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("stage", choices=("channels", "cost", "study", "scales", "compare"))
-    parser.add_argument("--data", type=Path, default=DATA, help="SHREC 2007 folder")
-    parser.add_argument("--cache", type=Path, default=CACHE, help="channel cache (.npz)")
-    parser.add_argument("--jobs", type=int, default=2, help="worker processes for channels")
-    parser.add_argument("--solver", default="auto", help="sparse solver for compare")
+    stages = {
+        "measure": measure,
+        "study": study,
+        "compare": compare,
+        "cost": cost,
+        "coarse": coarse,
+    }
+    parser.add_argument("stage", choices=(*stages, "shapedna"))
+    parser.add_argument("files", nargs="*", type=Path, help="the shapedna stage's meshes")
+    parser.add_argument("--data-root", type=Path, default=DATA_ROOT, help="unpacked collections")
+    parser.add_argument("--cache", type=Path, default=CACHE, help="folder of the caches")
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes of measure")
+    parser.add_argument("--every", type=int, default=10, help="cost: every k-th SHREC07 mesh")
+    parser.add_argument("--rounds", type=int, default=3, help="cost: rounds of timings")
+    parser.add_argument("--vertices", type=int, nargs="+", default=[1000, 2000], help="coarse")
     args = parser.parse_args()
-    if not (args.data / "ant").is_dir():
-        sys.exit(f"SHREC 2007 not found at {args.data}")
-    stages = {"channels": channels, "cost": cost, "study": study, "scales": scales}
-    stages["compare"] = compare
+    if args.stage == "shapedna":
+        for path in args.files:
+            shapedna(path)
+        return
     stages[args.stage](args)
 
 

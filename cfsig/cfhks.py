@@ -1,7 +1,7 @@
 """The ``cfhks`` descriptor: phi, the low Laplace-Beltrami spectrum and heat kernel signatures.
 
-Three channels, all invariant to rigid motion and scale and all (nearly) invariant to isometric
-bending, computed from the one factorisation that the conformal factor's solve makes
+Up to three channels, all invariant to rigid motion and scale and all (nearly) invariant to
+isometric bending, computed from the one factorisation that the conformal factor's solve makes
 (see docs/descriptors.md for what each captures and how every constant here was chosen):
 
 - ``phi``: the distribution of the conformal factor over the surface, as ``QUANTILES``
@@ -23,9 +23,9 @@ and the index and search treat every descriptor alike.
 Versions (`Params.version`; an index stores its own, and a query recomputes with it):
 
 1. Four times (0.005 to 0.04), equal weights, medians over SHREC 2007's pairs.
-2. Eight times (0.0025 to 0.32, doubling), weights 1/2 (phi), 1 (spectrum), 3 (heat) and the
-   heat distance averaged over the times, all chosen on SHREC 2007 and McGill together, with
-   the medians averaged over those two collections.
+2. Eight times (0.0025 to 0.32, doubling), weights 0 (phi: left out of the vector), 1
+   (spectrum) and 3 (heat, its distance averaged over the times), chosen on SHREC 2007 and
+   McGill together, with the medians averaged over those two collections.
 """
 
 from __future__ import annotations
@@ -49,31 +49,33 @@ class Design:
     ----------
     times : tuple of float
         Diffusion times of the heat channel divided by the surface area (dimensionless).
-    phi, spectrum : float
-        Divisors of the phi and the spectrum distance.
+    phi : float or None
+        Divisor of the phi distance; None leaves phi out of the vector.
+    spectrum : float
+        Divisor of the spectrum distance.
     heat : tuple of float
         Divisor of each time's heat distance, one per time.
     """
 
     times: tuple[float, ...]
-    phi: float
+    phi: float | None
     spectrum: float
     heat: tuple[float, ...]
 
     @property
     def length(self) -> int:
         """Length of the descriptor vector."""
-        return QUANTILES + EIGENPAIRS + QUANTILES * len(self.times)
+        return (self.phi is not None) * QUANTILES + EIGENPAIRS + QUANTILES * len(self.times)
 
 
 _V1_HEAT = (0.1176, 0.1588, 0.2298, 0.2984)  # per time, then their sum's median, 4.038
 _V2_TIMES = tuple(0.0025 * 2.0**j for j in range(8))
 # The medians are printed by `python benchmarks/descriptors.py study` (docs/descriptors.md):
 # version 1 over SHREC 2007's pairs; version 2 the mean of SHREC 2007's and McGill's, each
-# divided by its channel's weight (phi 1/2, heat 3, its time average taken by the divisor).
+# divided by its channel's weight (heat 3, its time average taken by the divisor).
 DESIGNS = {
     1: Design((0.005, 0.01, 0.02, 0.04), 1.834, 0.2815, tuple(s * 4.038 for s in _V1_HEAT)),
-    2: Design(_V2_TIMES, 1.7167 / 0.5, 0.3173, (len(_V2_TIMES) * 0.2152 / 3,) * len(_V2_TIMES)),
+    2: Design(_V2_TIMES, None, 0.3173, (len(_V2_TIMES) * 0.2152 / 3,) * len(_V2_TIMES)),
 }
 
 
@@ -152,12 +154,13 @@ def weigh(parts: dict[str, np.ndarray], design: Design) -> np.ndarray:
     Returns
     -------
     vector : (design.length,) float64
-        ``phi`` quantiles, then the log spectrum, then the heat quantiles time by time, each
-        entry divided by its channel's length and divisor.
+        ``phi`` quantiles (unless ``design.phi`` is None), then the log spectrum, then the heat
+        quantiles time by time, each entry divided by its channel's length and divisor.
     """
+    phi = [] if design.phi is None else [parts["phi"] / (QUANTILES * design.phi)]
     return np.concatenate(
         [
-            parts["phi"] / (QUANTILES * design.phi),
+            *phi,
             parts["spectrum"] / (EIGENPAIRS * design.spectrum),
             (parts["heat"] / (QUANTILES * np.asarray(design.heat)[:, None])).ravel(),
         ]

@@ -51,8 +51,9 @@ _descriptor_option = click.option(
     "--descriptor",
     type=click.Choice(DESCRIPTORS),
     default=None,
-    help="What to compute: the paper's histogram (cf) or phi, spectrum and heat kernel "
-    "signature (cfhks) [compute: cf; index: cfhks, or an existing index's own].",
+    help="What to compute: the paper's histogram (cf) or the spectrum and heat kernel "
+    "signatures (cfhks, its latest version) [compute: cf; index: cfhks, or an existing "
+    "index's own descriptor and version].",
 )
 _solver_option = click.option(
     "--solver",

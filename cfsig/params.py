@@ -11,7 +11,7 @@ VERSIONS = {"cf": (1,), "cfhks": (1, 2)}
 REPAIR_MODES = ("auto", "off", "proxy")
 # The length of the cfhks vector per version, `cfsig.cfhks.DESIGNS[version].length`
 # (tests/test_cfhks.py checks that the two agree), here so that an index needs no SciPy.
-CFHKS_LENGTHS = {1: 64 + 30 + 64 * 4, 2: 64 + 30 + 64 * 8}
+CFHKS_LENGTHS = {1: 64 + 30 + 64 * 4, 2: 30 + 64 * 8}
 SOLVERS = ("auto", "cholmod", "eigen", "scipy")  # sparse solver backends (`cfsig.conformal`)
 
 
@@ -27,11 +27,9 @@ class Params:
     descriptor : str
         What the signature is (one of `DESCRIPTORS`; docs/descriptors.md): ``"cf"``, the
         paper's histogram of phi, to which every other attribute applies; ``"cfhks"``, the
-        quantiles of phi, the low Laplace-Beltrami spectrum and heat kernel signatures, whose
-        constants are fixed in `cfsig.cfhks` and which uses only ``mollify`` of the others.
-    version : int or None
-        The descriptor's version (one of ``VERSIONS[descriptor]``); None, the default, is its
-        latest. Stored with the rest, so an index keeps computing the version it was made with.
+        low Laplace-Beltrami spectrum and heat kernel signatures (version 1 also the quantiles
+        of phi), whose constants are fixed per version in `cfsig.cfhks` and which uses only
+        ``mollify`` and ``repair`` of the others.
     bins : int
         Number of histogram bins (paper section 2.3: 200).
     low, high : float
