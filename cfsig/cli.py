@@ -240,8 +240,8 @@ def _report_errors(errors: list[str]) -> None:
     "-o",
     "--output",
     required=True,
-    type=_FILE,
-    help="The index file (HDF5); created, or updated with new and changed meshes.",
+    type=_PATH,
+    help="The index (a folder of HDF5 files); created, or updated with new and changed meshes.",
 )
 @_with(_params_options)
 @_descriptor_option
@@ -305,7 +305,7 @@ def index(
             added, skipped = index_meshes(
                 writer, paths, solver, jobs, scheduler, strict, commit_every, bar
             )
-        total = len(writer.known)  # after the last commit
+        total = len(writer)  # after the last commit
     except CfsigError as exc:
         _fail(str(exc))
     click.echo(f"{output}: {added} meshes added or updated, {total} in the index")
@@ -332,7 +332,7 @@ def _format_routes(routes: Counter[str]) -> str:
 
 
 @main.command()
-@click.argument("index_file", type=_FILE)
+@click.argument("index_file", type=_PATH)
 @click.argument("meshes", nargs=-1, required=True, type=_PATH)
 @_count_option("-k", default=20, help="Number of results per query.")
 @_solver_option
@@ -400,7 +400,7 @@ def query(index_file, meshes, k, solver, as_json, png) -> None:
 @click.option(
     "--index",
     "index_file",
-    type=_FILE,
+    type=_PATH,
     help="Evaluate the signatures of an index instead of computing them.",
 )
 @click.option(
