@@ -492,10 +492,16 @@ class IndexWriter:
         drops = np.concatenate([np.zeros((0, 2), np.int64), *kept])
         drops = drops[~np.isin(drops[:, 0], list(inside))]  # rows of older segments stay dropped
         pieces = (p for s in run for p in scan_segment(self._file(s.id), dead[s.id]))
-        self._write(pieces, sum(s.live for s in run), drops, start)
+        self._write(pieces, sum(s.live for s in run), drops, start, new=False)
 
-    def _write(self, pieces: Iterable[Piece], rows: int, drops: np.ndarray, start: int) -> None:
-        """Write a segment and publish a manifest where it replaces the segments from ``start``."""
+    def _write(
+        self, pieces: Iterable[Piece], rows: int, drops: np.ndarray, start: int, new: bool = True
+    ) -> None:
+        """Write a segment and publish a manifest where it replaces the segments from ``start``.
+
+        ``drops`` are the rows of older segments it supersedes: newly (a commit), or already
+        (a merge, which carries them over).
+        """
         old = self._manifest
         info = SegmentInfo(old.next_id, rows, rows, 0)
         path = self.path / info.file
@@ -503,10 +509,8 @@ class IndexWriter:
             write_segment(path, info.id, signature_length(self.params), rows, pieces, drops)
             _fsync(path)
             info = replace(info, crc32=file_crc(path))
-            counts = {
-                int(s): int(n)
-                for s, n in zip(*np.unique(drops[:, 0], return_counts=True), strict=True)
-            }
+            ids, dropped = np.unique(drops[:, 0] if new else [], return_counts=True)
+            counts = {int(s): int(n) for s, n in zip(ids, dropped, strict=True)}
             older = [replace(s, live=s.live - counts.get(s.id, 0)) for s in old.segments[:start]]
             manifest = Manifest(self.params, (*older, info), info.id + 1)
             write_manifest(self.path, manifest)
@@ -713,6 +717,7 @@ def _dead_rows(
 def _piece(records: list[tuple[Entry, Signature]], width: int) -> Piece:
     """The rows of some records, as `write_segment` takes them."""
     sigs = [s for _, s in records]
+    phi = np.array([s.phi_range for s in sigs], np.float64).reshape(-1, 2)
     return {
         "signatures": np.array([s.vector for s in sigs], np.float32).reshape(-1, width),
         "names": np.array([e.name for e, _ in records], object),
@@ -722,8 +727,8 @@ def _piece(records: list[tuple[Entry, Signature]], width: int) -> Piece:
         "n_vertices": np.array([s.n_vertices for s in sigs], np.int64),
         "n_faces": np.array([s.n_faces for s in sigs], np.int64),
         "n_components": np.array([s.n_components for s in sigs], np.int64),
-        "phi_min": np.array([s.phi_range[0] for s in sigs], np.float64),
-        "phi_max": np.array([s.phi_range[1] for s in sigs], np.float64),
+        "phi_min": phi[:, 0],
+        "phi_max": phi[:, 1],
         "curvature_error": np.array([s.curvature_error for s in sigs], np.float64),
     }
 
@@ -781,6 +786,33 @@ def check_index(path: str | os.PathLike) -> list[str]:
             for f in files:
                 f.close()
     return problems
+
+
+def compact_index(path: str | os.PathLike) -> tuple[int, int]:
+    """Merge every segment of an index into one (`IndexWriter.compact`).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The index folder.
+
+    Returns
+    -------
+    segments : int
+        Segments before.
+    rows : int
+        Entries in the index.
+
+    Raises
+    ------
+    IndexFileError
+        The index is unusable, damaged, or another process is writing it.
+    """
+    path = Path(path)
+    with IndexWriter(path, read_manifest(path).params) as writer:
+        before = len(writer.segments)
+        writer.compact()
+        return before, len(writer)
 
 
 def convert_index(source: str | os.PathLike, target: str | os.PathLike) -> int:

@@ -105,7 +105,10 @@ def nearest(reader: IndexReader, queries: np.ndarray, k: int) -> tuple[np.ndarra
             view, block = task
             rows = read_block(view.signatures, block, buffer)
             dead = view.dead[(view.dead >= block.start) & (view.dead < block.stop)] - block.start
-            live = None if not len(dead) else np.delete(np.ones(len(rows), bool), dead)
+            live = None
+            if len(dead):
+                live = np.ones(len(rows), bool)
+                live[dead] = False
             for q0 in range(0, len(queries), group):
                 count = len(queries[q0 : q0 + group])
                 dist = out[: count * len(rows)].reshape(count, len(rows))  # C-contiguous

@@ -62,9 +62,9 @@ def test_index_meshes_adds_new_and_changed_files_only(meshes, tmp_path):
     index = tmp_path / "library.h5"
     seen = []
 
-    def progress(outcomes, total):
-        seen.append(total)
+    def progress(outcomes, total):  # the total grows as the folder is scanned
         yield from outcomes
+        seen.append(total())
 
     with IndexWriter(index, Params()) as writer:
         added, failures = index_meshes(writer, [meshes], jobs=2, progress=progress)
