@@ -256,7 +256,7 @@ def _report_errors(errors: list[str]) -> None:
 @_count_option(
     "--commit-every",
     default=200,
-    help="Commit to the index file after this many meshes (and every 30 s).",
+    help="Commit to the index after this many meshes (and every 30 s).",
 )
 def index(
     paths,
@@ -272,7 +272,7 @@ def index(
     strict,
     commit_every,
 ) -> None:
-    """Index mesh files and folders (recursively: OFF, OBJ, PLY, STL) into an HDF5 file.
+    """Index mesh files and folders (recursively: OFF, OBJ, PLY, STL) into an index folder.
 
     Each mesh is stored under its path relative to the folder given, labelled with the name of
     the folder that holds it. Running the command again adds new and changed files only.

@@ -193,7 +193,7 @@ def collection_from_index(path: str | os.PathLike) -> tuple[str, Collection]:
     Parameters
     ----------
     path : str or os.PathLike
-        The HDF5 index file.
+        The index (a folder, or a format-1 file).
 
     Returns
     -------

@@ -26,7 +26,7 @@ import math
 import os
 import shutil
 import zlib
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import IO, TYPE_CHECKING
@@ -542,11 +542,11 @@ class IndexWriter:
         if not names or not self.segments:
             return [None] * len(names)
         if self._keys is None:
-            self._keys = {s.id: _Keys.read(self._file(s.id)) for s in self.segments}
-            for s in self.segments:
-                for seg, row in self._file(s.id)["drops"][:]:
-                    if int(seg) in self._keys:
-                        self._keys[int(seg)].dead.add(int(row))
+            files = [self._file(s.id) for s in self.segments]
+            dead = _dead_rows(self.segments, files, self.path)
+            self._keys = {
+                s.id: _Keys.read(f, dead[s.id]) for s, f in zip(self.segments, files, strict=True)
+            }
         keys = name_keys(names)
         found: list[tuple[int, int] | None] = [None] * len(names)
         for s in reversed(self.segments):
@@ -586,8 +586,8 @@ class _Keys:
     dead: set[int]
 
     @classmethod
-    def read(cls, f: h5py.File) -> _Keys:
-        return cls(f["key_sorted"][:], f["key_rows"][:], set())
+    def read(cls, f: h5py.File, dead: Iterable[int] = ()) -> _Keys:
+        return cls(f["key_sorted"][:], f["key_rows"][:], set(map(int, dead)))
 
 
 def read_manifest(path: Path) -> Manifest:
@@ -767,8 +767,6 @@ def check_index(path: str | os.PathLike) -> list[str]:
         found: list[str] = []
         try:
             with _open_segment(path, info) as f:
-                drops = f["drops"][:]  # scanned below; read here to name a failure to read it
-                del drops
                 for _ in scan_segment(f, np.zeros(0, np.int64), found):
                     pass
         except (OSError, KeyError, ValueError, IndexFileError) as exc:
@@ -840,14 +838,11 @@ def convert_index(source: str | os.PathLike, target: str | os.PathLike) -> int:
         raise IndexFileError(f"{target}: already exists")
     with IndexReader(source) as reader, IndexWriter(target, reader.params, merge=False) as writer:
         writer.commit()  # creates the empty index
-        writer._write(_reader_pieces(reader), len(reader), np.zeros((0, 2), np.int64), 0)
+        pieces = (
+            p for view in reader.segments for p in scan_segment(view.signatures.file, view.dead)
+        )
+        writer._write(pieces, len(reader), np.zeros((0, 2), np.int64), 0)
         return len(reader)
-
-
-def _reader_pieces(reader: IndexReader) -> Iterator[Piece]:
-    """Every live row of an open index, in pieces, checking checksums where there are some."""
-    for view in reader.segments:
-        yield from scan_segment(view.signatures.file, view.dead)
 
 
 def file_crc(path: Path) -> int:
