@@ -1,4 +1,4 @@
-"""Blocks: stream the rows of a 2-D float32 HDF5 dataset without holding it in memory.
+"""Blocks: stream the rows of a 2-D HDF5 dataset (float32 rows, uint8 codes) without holding it.
 
 Where HDF5 stores rows as plain bytes (contiguous, or chunked by whole rows with no filter, in a
 file without a user block, read by the default driver), a block is read from the file with one
@@ -21,7 +21,7 @@ import numpy as np
 
 from .errors import IndexFileError
 
-_FLOAT32 = np.dtype(np.float32)
+_PLAIN = (np.dtype(np.float32), np.dtype(np.uint8))  # native types read as bytes
 
 
 @dataclass(frozen=True)
@@ -64,7 +64,7 @@ def plan_blocks(dataset: h5py.Dataset, rows_per_block: int) -> list[Block]:
     base = dataset.id.get_offset() if plain else None
     if dataset.chunks is not None:
         rows_per_block = -(-rows_per_block // dataset.chunks[0]) * dataset.chunks[0]
-    row_bytes = dataset.shape[1] * _FLOAT32.itemsize
+    row_bytes = dataset.shape[1] * dataset.dtype.itemsize
     return [
         Block(s, min(s + rows_per_block, n), None if base is None else base + s * row_bytes)
         for s in range(0, n, rows_per_block)
@@ -80,12 +80,12 @@ def read_block(dataset: h5py.Dataset, block: Block, buffer: np.ndarray) -> np.nd
         The dataset the block was planned on, still open.
     block : Block
         From `plan_blocks`.
-    buffer : (rows, bins) float32, C-contiguous
+    buffer : (rows, bins) ndarray of the dataset's type, C-contiguous
         Space for at least ``block.stop - block.start`` rows, reused from block to block.
 
     Returns
     -------
-    rows : (block.stop - block.start, bins) float32
+    rows : (block.stop - block.start, bins) ndarray
         A view of ``buffer``.
 
     Raises
@@ -99,12 +99,14 @@ def read_block(dataset: h5py.Dataset, block: Block, buffer: np.ndarray) -> np.nd
         return out
     handle = dataset.file.id.get_vfd_handle()
     if os.preadv(handle, [out.data.cast("B")], block.offset) != out.nbytes:
-        raise IndexFileError(f"{dataset.file.filename}: the file ends inside the signatures")
+        raise IndexFileError(
+            f"{dataset.file.filename}: the file ends inside the {dataset.name[1:]}"
+        )
     return out
 
 
 def _plain(dataset: h5py.Dataset) -> bool:
-    """Whether the dataset's rows are plain native float32 bytes at known file offsets."""
+    """Whether the dataset's rows are plain native float32 or uint8 bytes at known offsets."""
     dcpl = dataset.id.get_create_plist()
     layout = dcpl.get_layout()
     chunked_by_rows = layout == h5py.h5d.CHUNKED and dataset.chunks[1] == dataset.shape[1]
@@ -112,7 +114,7 @@ def _plain(dataset: h5py.Dataset) -> bool:
         hasattr(os, "preadv")  # not on Windows: read through h5py there
         and dataset.file.driver == "sec2"
         and dataset.file.id.get_create_plist().get_userblock() == 0
-        and dataset.dtype == _FLOAT32
+        and dataset.dtype in _PLAIN
         and dataset.ndim == 2
         and (layout == h5py.h5d.CONTIGUOUS or chunked_by_rows)
         and dcpl.get_nfilters() == 0
@@ -122,7 +124,7 @@ def _plain(dataset: h5py.Dataset) -> bool:
 
 def _chunk_offsets(dataset: h5py.Dataset) -> dict[int, int]:
     """File offsets of a chunked dataset's allocated, unfiltered chunks, by first row."""
-    full = dataset.chunks[0] * dataset.shape[1] * _FLOAT32.itemsize
+    full = dataset.chunks[0] * dataset.shape[1] * dataset.dtype.itemsize
     infos: list = []
     try:
         dataset.id.chunk_iter(infos.append)
