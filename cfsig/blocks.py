@@ -105,6 +105,49 @@ def read_block(dataset: h5py.Dataset, block: Block, buffer: np.ndarray) -> np.nd
     return out
 
 
+def read_rows(
+    dataset: h5py.Dataset, blocks: list[Block], rows: np.ndarray, out: np.ndarray
+) -> np.ndarray:
+    """Some rows of a dataset, each read where it lies: one ``preadv`` per row when it can.
+
+    Parameters
+    ----------
+    dataset : h5py.Dataset
+        The dataset the blocks were planned on, still open.
+    blocks : list of Block
+        From `plan_blocks`.
+    rows : (m,) int
+        Row numbers, sorted.
+    out : (m, bins) ndarray of the dataset's type, C-contiguous
+        Filled with the rows.
+
+    Returns
+    -------
+    out : (m, bins) ndarray
+
+    Raises
+    ------
+    IndexFileError
+        The file ends before a row does.
+    """
+    starts = np.array([b.start for b in blocks], np.int64)
+    row_bytes = dataset.shape[1] * dataset.dtype.itemsize
+    handle = dataset.file.id.get_vfd_handle() if any(b.offset is not None for b in blocks) else -1
+    for i, (row, which) in enumerate(
+        zip(rows, np.searchsorted(starts, rows, "right") - 1, strict=True)
+    ):
+        block = blocks[which]
+        if block.offset is None:
+            dataset.read_direct(out, np.s_[int(row) : int(row) + 1], np.s_[i : i + 1])
+            continue
+        offset = block.offset + (int(row) - block.start) * row_bytes
+        if os.preadv(handle, [out[i].data.cast("B")], offset) != row_bytes:
+            raise IndexFileError(
+                f"{dataset.file.filename}: the file ends inside the {dataset.name[1:]}"
+            )
+    return out
+
+
 def _plain(dataset: h5py.Dataset) -> bool:
     """Whether the dataset's rows are plain native float32 or uint8 bytes at known offsets."""
     dcpl = dataset.id.get_create_plist()

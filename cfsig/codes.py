@@ -18,6 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 _WORDS = 128  # uint64 words summed at a time: 16-bit lanes hold 2 * 255 * 128 < 65536
+_PIECE_ROWS = 1024  # rows of codes per pass: 360 KB at 350 values, in the L2 cache
+_MASK = np.uint64(0x00FF00FF00FF00FF)
 
 
 def code_width(length: int) -> int:
@@ -102,19 +104,31 @@ def sad(codes: np.ndarray, query: np.ndarray) -> np.ndarray:
     -------
     sums : (m,) uint64
         ``sum_i |codes[j, i] - query[i]|``, exactly: |a - b| as max - min in uint8, then eight
-        bytes at a time in the 16-bit lanes of uint64 words.
+        bytes at a time in the 16-bit lanes of uint64 words; in pieces of rows that stay in
+        the L2 cache, against a tiled query (numpy is faster without broadcasting).
     """
-    diff = np.maximum(codes, query)
-    diff -= np.minimum(codes, query)
-    words = diff.view(np.uint64)
-    mask = np.uint64(0x00FF00FF00FF00FF)
+    rows = min(_PIECE_ROWS, len(codes))
+    tiled = np.tile(query, (rows, 1))
+    high, low = np.empty_like(tiled), np.empty_like(tiled)
+    lanes = np.empty((rows, codes.shape[1] // 8), np.uint64)
+    shifted = np.empty_like(lanes)
     total = np.zeros(len(codes), np.uint64)
-    for start in range(0, words.shape[1], _WORDS):
-        part = words[:, start : start + _WORDS]
-        lanes = (part & mask) + ((part >> np.uint64(8)) & mask)
-        sums = lanes.sum(axis=1)
-        for shift in (0, 16, 32, 48):
-            total += (sums >> np.uint64(shift)) & np.uint64(0xFFFF)
+    for start in range(0, len(codes), rows):
+        piece = codes[start : start + rows]
+        m = len(piece)
+        diff, other = high[:m], low[:m]
+        np.maximum(piece, tiled[:m], out=diff)
+        np.minimum(piece, tiled[:m], out=other)
+        np.subtract(diff, other, out=diff)
+        words, pairs, spare = diff.view(np.uint64), lanes[:m], shifted[:m]
+        np.bitwise_and(words, _MASK, out=pairs)
+        np.right_shift(words, np.uint64(8), out=spare)
+        np.bitwise_and(spare, _MASK, out=spare)
+        np.add(pairs, spare, out=pairs)
+        for first in range(0, pairs.shape[1], _WORDS):
+            sums = pairs[:, first : first + _WORDS].sum(axis=1)
+            for shift in (0, 16, 32, 48):
+                total[start : start + m] += (sums >> np.uint64(shift)) & np.uint64(0xFFFF)
     return total
 
 

@@ -15,7 +15,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from .blocks import Block, plan_blocks, read_block
+from .blocks import Block, plan_blocks, read_block, read_rows
 from .codes import encode, sad
 from .index import Entry, IndexReader, SegmentView
 from .l1 import choose_kernel
@@ -143,6 +143,7 @@ def _scan_codes(reader: IndexReader, queries: np.ndarray, best: _Best) -> None:
     grids = [view.grid for view in views if view.grid is not None]
     coded = [encode(queries, *g) for g in grids]
     blocks = [(i, b) for i, view in enumerate(views) for b in plan_blocks(view.codes, _BLOCK_ROWS)]
+    code_errors = [view.signatures.file["code_error"][:] for view in views]  # 8 bytes a row
     bounds = _Bounds(len(queries), best.k)
     todo = iter(blocks)
     lock = threading.Lock()
@@ -154,7 +155,7 @@ def _scan_codes(reader: IndexReader, queries: np.ndarray, best: _Best) -> None:
             i, block = task
             view, (query_codes, query_errors) = views[i], coded[i]
             codes = read_block(view.codes, block, buffer)
-            errors = view.signatures.file["code_error"][block.start : block.stop]
+            errors = code_errors[i][block.start : block.stop]
             live = _live(view, block)
             for j in range(len(queries)):
                 approx = sad(codes, query_codes[j]) * grids[i][1]
@@ -167,11 +168,16 @@ def _scan_codes(reader: IndexReader, queries: np.ndarray, best: _Best) -> None:
                     bounds.take(j, view.start + block.start, low, high)
 
     _in_threads(work, len(blocks))
+    starts = np.array([view.start for view in views])
+    plans = [plan_blocks(view.signatures, _BLOCK_ROWS) for view in views]
     for j in range(len(queries)):
         rows = bounds.candidates(j)
-        if not len(rows):
-            continue
-        vectors = np.ascontiguousarray(reader.signatures[reader.logical_rows(rows)])
+        vectors = np.empty((len(rows), queries.shape[1]), np.float32)
+        which = np.searchsorted(starts, rows, "right") - 1
+        for i in np.unique(which):
+            mine = which == i
+            local = rows[mine] - views[i].start
+            vectors[mine] = read_rows(views[i].signatures, plans[i], local, vectors[mine])
         dist = np.empty((1, len(rows)), np.float32)
         choose_kernel(len(rows))(queries[j : j + 1], vectors, dist)
         best.take(j, rows, dist[0])
