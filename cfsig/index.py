@@ -496,7 +496,8 @@ class IndexWriter:
         """Replace the segments from ``start`` on by one holding their live rows."""
         run = self.segments[start:]
         inside = {s.id for s in run}
-        dead = _dead_rows(self.segments, [self._file(s.id) for s in self.segments], self.path)
+        # The run ends the list: the rows of it that are superseded are named by its own drops.
+        dead = _dead_rows(run, [self._file(s.id) for s in run], self.path)
         kept = [self._file(s.id)["drops"][:] for s in run]
         drops = np.concatenate([np.zeros((0, 2), np.int64), *kept])
         drops = drops[~np.isin(drops[:, 0], list(inside))]  # rows of older segments stay dropped
@@ -539,9 +540,10 @@ class IndexWriter:
             if (f := self._files.pop(s.id, None)) is not None:
                 f.close()
             (self.path / s.file).unlink(missing_ok=True)
-        self._keys = None if start < len(old.segments) or self._keys is None else self._keys
-        if self._keys is not None:
-            for seg, row in drops:
+        if self._keys is not None:  # the keys of the segments kept stay as they are
+            for s in old.segments[start:]:
+                del self._keys[s.id]
+            for seg, row in drops if new else ():
                 self._keys[int(seg)].dead.add(int(row))
             self._keys[info.id] = _Keys.read(self._file(info.id))
 
