@@ -1,7 +1,7 @@
 """The index at scale: commit time against index size, query time and memory, a Dask run.
 
 Usage: python benchmarks/index_scale.py [--sizes 10000 100000 1000000 10000000] [--dir DIR]
-       [--dask-tasks 20000] [--workers 4] [--keep] [--shrec NPZ]
+       [--dask-tasks 20000] [--workers 4] [--keep]
 
 Builds synthetic indexes of random `cfhks`-length rows through `IndexWriter` (commits of
 1,000,000 rows, no merging while building) in DIR (default: a temporary folder under /work),
@@ -9,15 +9,11 @@ then measures, each in a fresh process:
 
 - commit: open a writer, add 200 new rows, commit (median and max of 5, and the seconds to open);
 - a run of 100 such commits in one process, merges included (median, 95th percentile, max);
-- query: open, one query, names of the top 20 (median of 3 after one warm-up) and peak memory,
-  by the 8-bit codes (the default for up to four queries) and by the float32 rows;
+- query: open, one query, names of the top 20 (median of 3 after one warm-up) and peak memory;
 - writer alone: rows per second added and committed in commits of 200 into the largest index;
 - Dask: a local cluster (one thread per worker) computing a stand-in signature per task through
   `cfsig.batch.compute_many`, its outcomes added to the largest index and committed every 200,
-  as `cfsig index --scheduler` does: signatures per second, and the writer's busy fraction;
-- the scan of 1M in-memory rows by storage (float32, float16, 8-bit), one query, one thread;
-- SHREC07's NN, FT, ST and mAP with queries by codes and by float32 rows, from cached `cfhks`
-  signatures (an npz of ``names`` and ``vec``; skipped when the file is missing).
+  as `cfsig index --scheduler` does: signatures per second, and the writer's busy fraction.
 
 Prints Markdown for docs/index-scale.md. Needs about 15 GB of disk per 10M rows; the indexes
 are deleted afterwards unless --keep.
@@ -146,18 +142,12 @@ out = {{'times': times, 'wall': time.perf_counter() - t0, 'segments': segments}}
     return in_child(code)
 
 
-def query_times(path: Path, rows: bool) -> dict:
-    """Open + one query + names of the top 20, median of 3 after a warm-up, in a fresh process.
-
-    By the 8-bit codes (what `nearest` does for up to four queries) or by the float32 rows.
-    """
+def query_times(path: Path) -> dict:
+    """Open + one query + names of the top 20, median of 3 after a warm-up, in a fresh process."""
     code = f"""
 import numpy as np
-import cfsig.nearest
 from cfsig.index import IndexReader
 from cfsig.nearest import search
-if {rows}:
-    cfsig.nearest.CODES_MAX_QUERIES = 0
 query = np.random.default_rng(5).random((1, {WIDTH}), dtype=np.float32)
 def once():
     t = time.perf_counter()
@@ -169,46 +159,6 @@ runs = [once() for _ in range(3)]
 out = {{'times': [t for t, _ in runs], 'rows': runs[0][1]}}
 """
     return in_child(code)
-
-
-def shrec_measures(npz: Path) -> dict:
-    """SHREC07's measures from `nearest` by codes and by rows, on cached cfhks signatures.
-
-    ``npz`` holds ``names`` (class/file) and ``vec`` (400, length); each signature queries the
-    index of all 400 for its whole ranking, and the distance matrices go to `evaluate_distances`.
-    """
-    import cfsig.nearest
-    from cfsig.index import IndexReader
-    from cfsig.measures import evaluate_distances
-    from cfsig.nearest import nearest
-    from cfsig.signature import Signature
-
-    data = np.load(npz)
-    names, vectors = [str(n) for n in data["names"]], data["vec"].astype(np.float32)
-    labels = [n.split("/")[0] for n in names]
-    out: dict = {}
-    with tempfile.TemporaryDirectory(dir="/work") as folder:
-        index = Path(folder) / "shrec"
-        params = Params(descriptor="cfhks")
-        with IndexWriter(index, params) as writer:
-            for name, label, vector in zip(names, labels, vectors, strict=True):
-                sig = Signature(vector, np.zeros(1), 1, 1, 1, 0.0, (), "clean", 0.0, "")
-                writer.add(Entry(name, label, name), sig)
-        with IndexReader(index) as reader:
-            for mode, limit in (("codes", cfsig.nearest.CODES_MAX_QUERIES), ("rows", 0)):
-                cfsig.nearest.CODES_MAX_QUERIES = limit
-                distances = np.empty((len(names), len(names)))
-                ranks = []
-                for i, vector in enumerate(vectors):
-                    rows, dist = nearest(reader, vector[None], len(names))
-                    distances[i, rows[0]] = dist[0]
-                    ranks.append(rows[0])
-                report = evaluate_distances(distances, labels)
-                out[mode] = {k: report.measures[k] for k in ("NN", "FT", "ST", "mAP")}
-                out[mode + "_ranks"] = np.array(ranks)
-            cfsig.nearest.CODES_MAX_QUERIES = limit
-    out["same_ranks"] = bool(np.array_equal(out.pop("codes_ranks"), out.pop("rows_ranks")))
-    return out
 
 
 def writer_alone(path: Path, first: int, rows: int) -> float:
@@ -256,11 +206,12 @@ def dask_run(path: Path, first: int, tasks: int, workers: int) -> dict:
 
 
 def sad_uint8(block: np.ndarray, query: np.ndarray) -> np.ndarray:
-    """Sums of absolute differences of uint8 rows (m, w) and a query (w,), w a multiple of 8.
+    """Sums of absolute differences of uint8 rows (m, w) and a query (w,) or (m, w), w = 8k.
 
     What an 8-bit layout with one scale for all rows and the query would scan with numpy, no
     decoding: |a - b| as max - min in uint8, then the bytes of each row summed eight at a time
-    in the 16-bit lanes of uint64 words.
+    in the 16-bit lanes of uint64 words (exact for w up to 1024). A tiled query (m, w) avoids
+    numpy's slower broadcasting.
     """
     diff = np.maximum(block, query)
     diff -= np.minimum(block, query)
@@ -313,10 +264,12 @@ def storage_scan(rows: int = 1_000_000) -> dict[str, float]:
     padded = np.zeros((rows, -(-WIDTH // 8) * 8), np.uint8)
     padded[:, :WIDTH] = codes
     best = float("inf")
+    tiled = np.tile(padded[0], (1024, 1))
     for _ in range(3):
         t = time.perf_counter()
         for start in range(0, rows, 1024):
-            sad_uint8(padded[start : start + 1024], padded[0])
+            block = padded[start : start + 1024]
+            sad_uint8(block, tiled[: len(block)])
         best = min(best, time.perf_counter() - t)
     seconds["uint8, bytes summed (numpy)"] = best
     return seconds
@@ -331,7 +284,6 @@ def main() -> None:
     parser.add_argument("--dask-tasks", type=int, default=20_000)
     parser.add_argument("--workers", type=int, default=4)
     parser.add_argument("--keep", action="store_true")
-    parser.add_argument("--shrec", type=Path, default=Path("/work/scratch/shrec_clean.npz"))
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="index-scale-", dir=args.dir or "/work"))
     started = time.time()
@@ -346,9 +298,8 @@ def main() -> None:
         "start.",
         "",
         "| rows | build s | index size | open writer s (median) | open + add 200 + commit s "
-        "(median of 5) | (max) | writer peak MB | query s, codes (median of 3) | peak MB | "
-        "query s, float32 rows | peak MB |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "(median of 5) | (max) | writer peak MB | query s (median of 3) | query peak MB |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     results = {}
     try:
@@ -357,16 +308,15 @@ def main() -> None:
             built = build(path, n)
             size = sum(f.stat().st_size for f in path.iterdir())
             commits = commit_times(path, 10**9, 5)
-            query, by_rows = query_times(path, False), query_times(path, True)
-            results[n] = {"commits": commits, "query": query, "rows": by_rows, "build": built}
+            query = query_times(path)
+            results[n] = {"commits": commits, "query": query, "build": built}
             print(n, json.dumps(results[n]), flush=True)
             lines.append(
                 f"| {n:,} | {built:.0f} | {size / 1e9:.2f} GB | "
                 f"{statistics.median(commits['open']):.3f} | "
                 f"{statistics.median(commits['total']):.3f} | {max(commits['total']):.3f} | "
                 f"{commits['peak_mb']:.0f} | {statistics.median(query['times']):.3f} | "
-                f"{query['peak_mb']:.0f} | {statistics.median(by_rows['times']):.3f} | "
-                f"{by_rows['peak_mb']:.0f} |"
+                f"{query['peak_mb']:.0f} |"
             )
         largest = folder / f"i{max(args.sizes)}"
         run = commit_run(largest, 2 * 10**9, COMMITS)
@@ -374,7 +324,6 @@ def main() -> None:
         alone = writer_alone(largest, 3 * 10**9, 20_000)
         dask = dask_run(largest, 4 * 10**9, args.dask_tasks, args.workers)
         scan = storage_scan()
-        shrec = shrec_measures(args.shrec) if args.shrec.exists() else None
         print(json.dumps({"run": run, "alone": alone, "dask": dask, "scan": scan}), flush=True)
         lines += [
             "",
@@ -395,16 +344,6 @@ def main() -> None:
             "One query over 1,000,000 rows in memory, one thread, best of 3 (the L1 kernel "
             "takes float32: compact rows are decoded piece by piece first): "
             + ", ".join(f"{k} {v:.3f} s" for k, v in scan.items())
-            + ".",
-            "",
-            "SHREC07 (400 cached `cfhks` signatures, " + str(args.shrec) + "), each the query "
-            "of its whole ranking through `nearest`: "
-            + (
-                "not run (no file)"
-                if shrec is None
-                else f"by codes {shrec['codes']}, by float32 rows {shrec['rows']}; "
-                f"identical rankings: {shrec['same_ranks']}"
-            )
             + ".",
             "",
             f"The run took {time.time() - started:.0f} s; load average {os.getloadavg()[0]:.1f} "

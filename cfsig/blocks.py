@@ -1,4 +1,4 @@
-"""Blocks: stream the rows of a 2-D HDF5 dataset (float32 rows, uint8 codes) without holding it.
+"""Blocks: stream the rows of a 2-D float32 HDF5 dataset without holding it in memory.
 
 Where HDF5 stores rows as plain bytes (contiguous, or chunked by whole rows with no filter, in a
 file without a user block, read by the default driver), a block is read from the file with one
@@ -21,7 +21,7 @@ import numpy as np
 
 from .errors import IndexFileError
 
-_PLAIN = (np.dtype(np.float32), np.dtype(np.uint8))  # native types read as bytes
+_FLOAT32 = np.dtype(np.float32)
 
 
 @dataclass(frozen=True)
@@ -64,7 +64,7 @@ def plan_blocks(dataset: h5py.Dataset, rows_per_block: int) -> list[Block]:
     base = dataset.id.get_offset() if plain else None
     if dataset.chunks is not None:
         rows_per_block = -(-rows_per_block // dataset.chunks[0]) * dataset.chunks[0]
-    row_bytes = dataset.shape[1] * dataset.dtype.itemsize
+    row_bytes = dataset.shape[1] * _FLOAT32.itemsize
     return [
         Block(s, min(s + rows_per_block, n), None if base is None else base + s * row_bytes)
         for s in range(0, n, rows_per_block)
@@ -80,12 +80,12 @@ def read_block(dataset: h5py.Dataset, block: Block, buffer: np.ndarray) -> np.nd
         The dataset the block was planned on, still open.
     block : Block
         From `plan_blocks`.
-    buffer : (rows, bins) ndarray of the dataset's type, C-contiguous
+    buffer : (rows, bins) float32, C-contiguous
         Space for at least ``block.stop - block.start`` rows, reused from block to block.
 
     Returns
     -------
-    rows : (block.stop - block.start, bins) ndarray
+    rows : (block.stop - block.start, bins) float32
         A view of ``buffer``.
 
     Raises
@@ -99,57 +99,12 @@ def read_block(dataset: h5py.Dataset, block: Block, buffer: np.ndarray) -> np.nd
         return out
     handle = dataset.file.id.get_vfd_handle()
     if os.preadv(handle, [out.data.cast("B")], block.offset) != out.nbytes:
-        raise IndexFileError(
-            f"{dataset.file.filename}: the file ends inside the {dataset.name[1:]}"
-        )
-    return out
-
-
-def read_rows(
-    dataset: h5py.Dataset, blocks: list[Block], rows: np.ndarray, out: np.ndarray
-) -> np.ndarray:
-    """Some rows of a dataset, each read where it lies: one ``preadv`` per row when it can.
-
-    Parameters
-    ----------
-    dataset : h5py.Dataset
-        The dataset the blocks were planned on, still open.
-    blocks : list of Block
-        From `plan_blocks`.
-    rows : (m,) int
-        Row numbers, sorted.
-    out : (m, bins) ndarray of the dataset's type, C-contiguous
-        Filled with the rows.
-
-    Returns
-    -------
-    out : (m, bins) ndarray
-
-    Raises
-    ------
-    IndexFileError
-        The file ends before a row does.
-    """
-    starts = np.array([b.start for b in blocks], np.int64)
-    row_bytes = dataset.shape[1] * dataset.dtype.itemsize
-    handle = dataset.file.id.get_vfd_handle() if any(b.offset is not None for b in blocks) else -1
-    for i, (row, which) in enumerate(
-        zip(rows, np.searchsorted(starts, rows, "right") - 1, strict=True)
-    ):
-        block = blocks[which]
-        if block.offset is None:
-            dataset.read_direct(out, np.s_[int(row) : int(row) + 1], np.s_[i : i + 1])
-            continue
-        offset = block.offset + (int(row) - block.start) * row_bytes
-        if os.preadv(handle, [out[i].data.cast("B")], offset) != row_bytes:
-            raise IndexFileError(
-                f"{dataset.file.filename}: the file ends inside the {dataset.name[1:]}"
-            )
+        raise IndexFileError(f"{dataset.file.filename}: the file ends inside the signatures")
     return out
 
 
 def _plain(dataset: h5py.Dataset) -> bool:
-    """Whether the dataset's rows are plain native float32 or uint8 bytes at known offsets."""
+    """Whether the dataset's rows are plain native float32 bytes at known file offsets."""
     dcpl = dataset.id.get_create_plist()
     layout = dcpl.get_layout()
     chunked_by_rows = layout == h5py.h5d.CHUNKED and dataset.chunks[1] == dataset.shape[1]
@@ -157,7 +112,7 @@ def _plain(dataset: h5py.Dataset) -> bool:
         hasattr(os, "preadv")  # not on Windows: read through h5py there
         and dataset.file.driver == "sec2"
         and dataset.file.id.get_create_plist().get_userblock() == 0
-        and dataset.dtype in _PLAIN
+        and dataset.dtype == _FLOAT32
         and dataset.ndim == 2
         and (layout == h5py.h5d.CONTIGUOUS or chunked_by_rows)
         and dcpl.get_nfilters() == 0
@@ -167,7 +122,7 @@ def _plain(dataset: h5py.Dataset) -> bool:
 
 def _chunk_offsets(dataset: h5py.Dataset) -> dict[int, int]:
     """File offsets of a chunked dataset's allocated, unfiltered chunks, by first row."""
-    full = dataset.chunks[0] * dataset.shape[1] * dataset.dtype.itemsize
+    full = dataset.chunks[0] * dataset.shape[1] * _FLOAT32.itemsize
     infos: list = []
     try:
         dataset.id.chunk_iter(infos.append)

@@ -26,7 +26,7 @@ import math
 import os
 import shutil
 import zlib
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import IO, TYPE_CHECKING
@@ -35,7 +35,6 @@ import h5py
 import numpy as np
 
 from . import __version__
-from .codes import grid, union_grid
 from .errors import IndexFileError
 from .params import Params, signature_length
 from .segments import (
@@ -138,17 +137,11 @@ class SegmentView:
         Number of rows, superseded ones included, in the segments before this one.
     dead : (d,) int64
         Sorted rows of this segment superseded by later ones.
-    codes : h5py.Dataset or None
-        (rows, width) uint8 codes of the signatures (`cfsig.codes`); None in a format-1 file.
-    grid : ((length,) float32, float) or None
-        Their offset and step.
     """
 
     signatures: h5py.Dataset
     start: int
     dead: np.ndarray
-    codes: h5py.Dataset | None = None
-    grid: tuple[np.ndarray, float] | None = None
 
 
 class IndexReader:
@@ -206,9 +199,7 @@ class IndexReader:
             dead = _dead_rows(manifest.segments, files, self.path)
             views, start = [], 0
             for info, f in zip(manifest.segments, files, strict=True):
-                views.append(
-                    SegmentView(f["signatures"], start, dead[info.id], f["codes"], _grid_of(f))
-                )
+                views.append(SegmentView(f["signatures"], start, dead[info.id]))
                 start += info.rows
             return manifest.params, views
         raise AssertionError("unreachable")  # pragma: no cover
@@ -474,7 +465,7 @@ class IndexWriter:
         found = self._find(list(latest))
         drops = np.array([loc for loc in found if loc is not None], np.int64).reshape(-1, 2)
         piece = _piece(list(latest.values()), signature_length(self.params))
-        self._write([piece], len(latest), drops, len(self.segments), grid(piece["signatures"]))
+        self._write([piece], len(latest), drops, len(self.segments))
         self._pending.clear()
         if self.merge:
             while (start := _merge_start(self.segments)) is not None:
@@ -502,29 +493,21 @@ class IndexWriter:
         drops = np.concatenate([np.zeros((0, 2), np.int64), *kept])
         drops = drops[~np.isin(drops[:, 0], list(inside))]  # rows of older segments stay dropped
         pieces = (p for s in run for p in scan_segment(self._file(s.id), dead[s.id]))
-        cover = union_grid([_grid_of(self._file(s.id)) for s in run])
-        self._write(pieces, sum(s.live for s in run), drops, start, cover, new=False)
+        self._write(pieces, sum(s.live for s in run), drops, start, new=False)
 
     def _write(
-        self,
-        pieces: Iterable[Piece],
-        rows: int,
-        drops: np.ndarray,
-        start: int,
-        codes: tuple[np.ndarray, float],
-        new: bool = True,
+        self, pieces: Iterable[Piece], rows: int, drops: np.ndarray, start: int, new: bool = True
     ) -> None:
         """Write a segment and publish a manifest where it replaces the segments from ``start``.
 
         ``drops`` are the rows of older segments it supersedes: newly (a commit), or already
-        (a merge, which carries them over). ``codes`` is the grid of its 8-bit codes.
+        (a merge, which carries them over).
         """
         old = self._manifest
         info = SegmentInfo(old.next_id, rows, rows, 0)
         path = self.path / info.file
         try:
-            width = signature_length(self.params)
-            write_segment(path, info.id, width, rows, pieces, drops, codes)
+            write_segment(path, info.id, signature_length(self.params), rows, pieces, drops)
             _fsync(path)
             info = replace(info, crc32=file_crc(path))
             ids, dropped = np.unique(drops[:, 0] if new else [], return_counts=True)
@@ -857,14 +840,10 @@ def convert_index(source: str | os.PathLike, target: str | os.PathLike) -> int:
         raise IndexFileError(f"{target}: already exists")
     with IndexReader(source) as reader, IndexWriter(target, reader.params, merge=False) as writer:
         writer.commit()  # creates the empty index
-
-        def pieces() -> Iterator[Piece]:
-            for view in reader.segments:
-                yield from scan_segment(view.signatures.file, view.dead)
-
-        empty = np.zeros((0, signature_length(reader.params)), np.float32)
-        cover = union_grid([grid(p["signatures"]) for p in pieces()] or [grid(empty)])
-        writer._write(pieces(), len(reader), np.zeros((0, 2), np.int64), 0, cover)
+        pieces = (
+            p for view in reader.segments for p in scan_segment(view.signatures.file, view.dead)
+        )
+        writer._write(pieces, len(reader), np.zeros((0, 2), np.int64), 0)
         return len(reader)
 
 
@@ -887,18 +866,13 @@ def file_crc(path: Path) -> int:
     return crc
 
 
-def _grid_of(f: h5py.File) -> tuple[np.ndarray, float]:
-    """The grid of a segment's codes."""
-    return f["code_offset"][:], float(f.attrs["code_step"])
-
-
 def _open_segment(folder: Path, info: SegmentInfo) -> h5py.File:
     """Open a segment read-only and check that it is the one the manifest lists."""
     f = _open_h5(folder / info.file, folder)
     ok = (
         f.attrs.get("format") == SEGMENT_FORMAT
         and int(f.attrs.get("segment", -1)) == info.id
-        and all(k in f for k in ("signatures", "drops", "codes", *COLUMNS))
+        and all(k in f for k in ("signatures", "drops", *COLUMNS))
         and f["signatures"].shape[0] == info.rows
     )
     if not ok:

@@ -8,25 +8,18 @@ from __future__ import annotations
 
 import os
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import TypeVar
 
 import numpy as np
 
-from .blocks import Block, plan_blocks, read_block, read_rows
-from .codes import encode, sad
+from .blocks import Block, plan_blocks, read_block
 from .index import Entry, IndexReader, SegmentView
 from .l1 import choose_kernel
 
 _BLOCK_ROWS = 16384  # rows per block of a dataset that is not chunked
 _OUT_CELLS = 1 << 20  # distances computed per kernel call (4 MB): bounds memory for many queries
-# Up to this many queries scan the 8-bit codes (a byte per value, one pass per query); more scan
-# the float32 rows, where faiss computes ten queries per pass (docs/index-scale.md).
-CODES_MAX_QUERIES = 4
-_MARGIN = 1e-4  # relative: float32 sums of a few hundred terms are far closer than this
-_T = TypeVar("_T")
 
 
 @dataclass(frozen=True)
@@ -96,20 +89,10 @@ def nearest(reader: IndexReader, queries: np.ndarray, k: int) -> tuple[np.ndarra
     best = _Best(len(queries), max(min(k, n), 0), reader.physical_rows)
     if best.k == 0 or len(queries) == 0:
         return best.result(reader)
-    coded = all(view.codes is not None for view in reader.segments)
-    if coded and len(queries) <= CODES_MAX_QUERIES:
-        _scan_codes(reader, queries, best)
-    else:
-        _scan_rows(reader, queries, best)
-    return best.result(reader)
-
-
-def _scan_rows(reader: IndexReader, queries: np.ndarray, best: _Best) -> None:
-    """`nearest` by the float32 rows: every distance computed, queries in groups."""
     blocks = [
         (view, b) for view in reader.segments for b in plan_blocks(view.signatures, _BLOCK_ROWS)
     ]
-    kernel = choose_kernel(len(queries) * len(reader))
+    kernel = choose_kernel(len(queries) * n)
     todo = iter(blocks)
     lock = threading.Lock()
 
@@ -121,7 +104,11 @@ def _scan_rows(reader: IndexReader, queries: np.ndarray, best: _Best) -> None:
         while (task := _next(todo, lock)) is not None:
             view, block = task
             rows = read_block(view.signatures, block, buffer)
-            live = _live(view, block)
+            dead = view.dead[(view.dead >= block.start) & (view.dead < block.stop)] - block.start
+            live = None
+            if len(dead):
+                live = np.ones(len(rows), bool)
+                live[dead] = False
             for q0 in range(0, len(queries), group):
                 count = len(queries[q0 : q0 + group])
                 dist = out[: count * len(rows)].reshape(count, len(rows))  # C-contiguous
@@ -129,58 +116,11 @@ def _scan_rows(reader: IndexReader, queries: np.ndarray, best: _Best) -> None:
                 with lock:
                     best.merge(q0, view.start + block.start, dist, live)
 
-    _in_threads(work, len(blocks))
-
-
-def _scan_codes(reader: IndexReader, queries: np.ndarray, best: _Best) -> None:
-    """`nearest` by the 8-bit codes: bounds on every distance, then the candidates exactly.
-
-    A row is a candidate while the lower bound of its distance (`cfsig.codes`) is within the
-    k-th smallest upper bound seen; the distances of the candidates left at the end are then
-    computed from their float32 rows, so the result is that of `_scan_rows`.
-    """
-    views = reader.segments
-    grids = [view.grid for view in views if view.grid is not None]
-    coded = [encode(queries, *g) for g in grids]
-    blocks = [(i, b) for i, view in enumerate(views) for b in plan_blocks(view.codes, _BLOCK_ROWS)]
-    code_errors = [view.signatures.file["code_error"][:] for view in views]  # 8 bytes a row
-    bounds = _Bounds(len(queries), best.k)
-    todo = iter(blocks)
-    lock = threading.Lock()
-
-    def work() -> None:
-        block_rows = max(b.stop - b.start for _, b in blocks)
-        buffer = np.empty((block_rows, coded[0][0].shape[1]), np.uint8)
-        while (task := _next(todo, lock)) is not None:
-            i, block = task
-            view, (query_codes, query_errors) = views[i], coded[i]
-            codes = read_block(view.codes, block, buffer)
-            errors = code_errors[i][block.start : block.stop]
-            live = _live(view, block)
-            for j in range(len(queries)):
-                approx = sad(codes, query_codes[j]) * grids[i][1]
-                slack = errors + query_errors[j]
-                low = np.where(np.isfinite(slack), approx - slack, -np.inf)
-                high = approx + slack
-                if live is not None:  # never candidates (NaN is within no limit)
-                    low[~live], high[~live] = np.nan, np.inf
-                with lock:
-                    bounds.take(j, view.start + block.start, low, high)
-
-    _in_threads(work, len(blocks))
-    starts = np.array([view.start for view in views])
-    plans = [plan_blocks(view.signatures, _BLOCK_ROWS) for view in views]
-    for j in range(len(queries)):
-        rows = bounds.candidates(j)
-        vectors = np.empty((len(rows), queries.shape[1]), np.float32)
-        which = np.searchsorted(starts, rows, "right") - 1
-        for i in np.unique(which):
-            mine = which == i
-            local = rows[mine] - views[i].start
-            vectors[mine] = read_rows(views[i].signatures, plans[i], local, vectors[mine])
-        dist = np.empty((1, len(rows)), np.float32)
-        choose_kernel(len(rows))(queries[j : j + 1], vectors, dist)
-        best.take(j, rows, dist[0])
+    threads = min(_threads(), len(blocks))
+    with ThreadPoolExecutor(threads) as pool:
+        for done in [pool.submit(work) for _ in range(threads)]:
+            done.result()
+    return best.result(reader)
 
 
 def search(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[Hit]]:
@@ -229,14 +169,10 @@ class _Best:
             candidates &= live
         for j in np.flatnonzero(candidates.any(axis=1)):
             new = np.flatnonzero(candidates[j])
-            self.take(first_query + j, new + first_row, dist[j, new])
-
-    def take(self, query: int, rows: np.ndarray, dist: np.ndarray) -> None:
-        """Take in the distances (m,) from one query to some rows (m,)."""
-        d = np.concatenate([self.dist[query], dist])
-        r = np.concatenate([self.rows[query], rows])
-        keep = np.lexsort((r, d))[: self.k]
-        self.dist[query], self.rows[query] = d[keep], r[keep]
+            d = np.concatenate([self.dist[first_query + j], dist[j, new]])
+            r = np.concatenate([self.rows[first_query + j], new + first_row])
+            keep = np.lexsort((r, d))[: self.k]
+            self.dist[first_query + j], self.rows[first_query + j] = d[keep], r[keep]
 
     def result(self, reader: IndexReader) -> tuple[np.ndarray, np.ndarray]:
         """Row numbers of the reader and distances, nearest first."""
@@ -245,54 +181,10 @@ class _Best:
         )
 
 
-class _Bounds:
-    """Per query: the k smallest upper bounds seen, and the rows whose lower bound is within."""
-
-    def __init__(self, n_queries: int, k: int) -> None:
-        self.upper = np.full((n_queries, k), np.inf)
-        self.found: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(n_queries)]
-
-    def limit(self, query: int) -> float:
-        """The largest distance a row among the k nearest can have, with a margin for float32."""
-        return float(self.upper[query].max()) * (1 + _MARGIN) + _MARGIN
-
-    def take(self, query: int, first_row: int, low: np.ndarray, high: np.ndarray) -> None:
-        """Take in the bounds (m,) of the distances from one query to rows ``first_row...``."""
-        k = self.upper.shape[1]
-        both = np.concatenate([self.upper[query], high])
-        self.upper[query] = np.partition(both, k - 1)[:k]
-        keep = np.flatnonzero(low <= self.limit(query))
-        if len(keep):
-            self.found[query].append((keep + first_row, low[keep]))
-
-    def candidates(self, query: int) -> np.ndarray:
-        """The rows whose lower bound is within the final limit, sorted."""
-        if not self.found[query]:
-            return np.zeros(0, np.int64)
-        rows, lows = (np.concatenate(parts) for parts in zip(*self.found[query], strict=True))
-        return np.sort(rows[lows <= self.limit(query)])
-
-
-def _live(view: SegmentView, block: Block) -> np.ndarray | None:
-    """Which rows of a block are not superseded, or None when all are."""
-    dead = view.dead[(view.dead >= block.start) & (view.dead < block.stop)] - block.start
-    if not len(dead):
-        return None
-    live = np.ones(block.stop - block.start, bool)
-    live[dead] = False
-    return live
-
-
-def _in_threads(work: Callable[[], None], tasks: int) -> None:
-    """Run ``work`` in one thread per core (at most one per task) and wait for all."""
-    threads = min(_threads(), tasks)
-    with ThreadPoolExecutor(threads) as pool:
-        for done in [pool.submit(work) for _ in range(threads)]:
-            done.result()
-
-
-def _next(blocks: Iterator[_T], lock: threading.Lock) -> _T | None:
-    """The next block to scan (with its segment), shared by the threads."""
+def _next(
+    blocks: Iterator[tuple[SegmentView, Block]], lock: threading.Lock
+) -> tuple[SegmentView, Block] | None:
+    """The next block to scan and its segment, shared by the threads."""
     with lock:
         return next(blocks, None)
 

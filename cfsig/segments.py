@@ -16,7 +16,6 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from .codes import code_width, encode
 from .errors import IndexFileError
 
 SEGMENT_FORMAT = "cfsig-segment"
@@ -34,10 +33,7 @@ COLUMNS = (*TEXT, "sha256", *META)  # the columns of a row besides its signature
 _DTYPES = {**{k: STRING for k in TEXT}, "sha256": "S64", **META}
 _CHUNK_ROWS = 4096  # rows per chunk of signatures, each with its CRC-32
 _PIECE_CHUNKS = 16  # chunks copied at a time by a merge: bounds its memory
-_EXTRA = (
-    "key_sorted", "key_rows", "drops", "signature_crc32", "codes", "code_error", "code_offset",
-)  # fmt: skip
-_CHECK_ROWS = 1 << 16  # rows of a dataset checked at a time
+_EXTRA = ("key_sorted", "key_rows", "drops", "signature_crc32")
 Piece = dict[str, np.ndarray]  # "signatures" (m, length) float32 and every column (m,)
 
 
@@ -98,13 +94,7 @@ def chunk_crcs(signatures: np.ndarray, chunk_rows: int) -> np.ndarray:
 
 
 def write_segment(
-    path: Path,
-    segment_id: int,
-    width: int,
-    rows: int,
-    pieces: Iterable[Piece],
-    drops: np.ndarray,
-    grid: tuple[np.ndarray, float],
+    path: Path, segment_id: int, width: int, rows: int, pieces: Iterable[Piece], drops: np.ndarray
 ) -> None:
     """Write a segment file from pieces of rows, with the keys of its names and its checksums.
 
@@ -123,8 +113,6 @@ def write_segment(
         `COLUMNS` (m,).
     drops : (d, 2) int64
         (segment, row) of the rows of older segments that rows of this one replace.
-    grid : ((width,) float32, float)
-        Offset and step of the 8-bit codes (`cfsig.codes`).
 
     Raises
     ------
@@ -138,10 +126,7 @@ def write_segment(
             "signatures", (rows, width), np.float32, chunks=(chunk, width) if rows else None
         )
         columns = {k: f.create_dataset(k, (rows,), _DTYPES[k]) for k in COLUMNS}
-        code_rows = (chunk, code_width(width)) if rows else None
-        codes = f.create_dataset("codes", (rows, code_width(width)), np.uint8, chunks=code_rows)
-        code_error = f.create_dataset("code_error", (rows,), np.float64)
-        crcs = dict.fromkeys((*COLUMNS, "codes", "code_error"), 0)
+        crcs = dict.fromkeys(COLUMNS, 0)
         sig_crcs, keys, start = [], [], 0
         for piece in _regroup(pieces, chunk * _PIECE_CHUNKS):
             stop = start + len(piece["signatures"])
@@ -152,12 +137,6 @@ def write_segment(
                 columns[key][start:stop] = values
                 crcs[key] = column_crc(values, crcs[key])
             keys.append(name_keys(piece["names"]))
-            coded, error = encode(piece["signatures"], *grid)
-            codes[start:stop], code_error[start:stop] = coded, error
-            crcs["codes"], crcs["code_error"] = (
-                column_crc(coded, crcs["codes"]),
-                column_crc(error, crcs["code_error"]),
-            )
             start = stop
         if start != rows:
             raise ValueError(f"{rows} rows announced, {start} given")
@@ -168,13 +147,11 @@ def write_segment(
             "key_rows": order.astype(np.uint32),
             "drops": np.asarray(drops, np.int64).reshape(-1, 2),
             "signature_crc32": np.concatenate([np.zeros(0, np.uint32), *sig_crcs]),
-            "code_offset": np.asarray(grid[0], np.float32),
         }
         for key, values in extra.items():
             f.create_dataset(key, data=values)
-            crcs[key] = column_crc(values)
-        f.attrs["code_step"] = float(grid[1])
         f.attrs.update({f"crc32_{k}": np.uint32(v) for k, v in crcs.items()})
+        f.attrs.update({f"crc32_{k}": np.uint32(column_crc(extra[k])) for k in _EXTRA})
 
 
 def scan_segment(
@@ -229,9 +206,7 @@ def scan_segment(
     if not verify:
         return
     for key in _EXTRA:
-        crcs[key] = 0
-        for start in range(0, max(len(f[key]), 1), _CHECK_ROWS):
-            crcs[key] = column_crc(f[key][start : start + _CHECK_ROWS], crcs[key])
+        crcs[key] = column_crc(f[key][:])
     for key, crc in crcs.items():
         if crc != int(f.attrs.get(f"crc32_{key}", -1)):
             _damage(found, problems, f, f"column {key}")
