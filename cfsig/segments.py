@@ -180,7 +180,6 @@ def scan_segment(
         Without ``problems``: a checksum does not match (columns are checked after their last
         piece).
     """
-    found = [] if problems is None else problems
     sigs = f["signatures"]
     n, verify = sigs.shape[0], "signature_crc32" in f
     chunk = sigs.chunks[0] if sigs.chunks else _CHUNK_ROWS
@@ -200,7 +199,7 @@ def scan_segment(
             for i in np.flatnonzero(got != want[start // chunk : start // chunk + len(got)]):
                 first = start + int(i) * chunk
                 last = min(first + chunk, n) - 1
-                _damage(found, problems, f, f"signatures rows {first}-{last}")
+                _damage(problems, f, f"signatures rows {first}-{last}")
         keep = np.setdiff1d(np.arange(start, stop), dead, assume_unique=True) - start
         yield {key: values[keep] for key, values in piece.items()}
     if not verify:
@@ -209,14 +208,14 @@ def scan_segment(
         crcs[key] = column_crc(f[key][:])
     for key, crc in crcs.items():
         if crc != int(f.attrs.get(f"crc32_{key}", -1)):
-            _damage(found, problems, f, f"column {key}")
+            _damage(problems, f, f"column {key}")
 
 
-def _damage(found: list[str], problems: list[str] | None, f: h5py.File, part: str) -> None:
+def _damage(problems: list[str] | None, f: h5py.File, part: str) -> None:
     """Record a checksum mismatch, or raise it when no list collects them."""
     if problems is None:
         raise IndexFileError(f"{f.filename}: {part} damaged (checksum mismatch)")
-    found.append(f"{part}: checksum mismatch")
+    problems.append(f"{part}: checksum mismatch")
 
 
 def _regroup(pieces: Iterable[Piece], size: int) -> Iterator[Piece]:
