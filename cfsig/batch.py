@@ -43,7 +43,9 @@ class Outcome:
     error: str = ""
 
 
-Progress = Callable[[Iterator[Outcome], int], Iterable[Outcome]]
+# progress(outcomes, total): wraps the outcomes; total() is the number expected so far, which
+# grows while a folder is still being scanned.
+Progress = Callable[[Iterator[Outcome], Callable[[], int]], Iterable[Outcome]]
 
 
 def compute_many(
@@ -134,11 +136,14 @@ def index_meshes(
 ) -> tuple[int, list[str]]:
     """Compute the new and changed meshes under some files and folders and add them to an index.
 
-    Files are found by `cfsig.mesh.find_meshes`; a file whose name is indexed with the same
-    contents (SHA-256) is skipped, the others are computed by `compute_many` and added as
-    `Entry` (name, the name of the folder holding the file as label, absolute path). The writer
-    commits every ``commit_every`` meshes and every 30 s, so a killed job keeps what it
-    committed; the caller's ``with writer`` commits the rest.
+    Files are found by `cfsig.mesh.find_meshes` as the computation goes: the first is computed
+    as soon as it is found, not after the whole folder has been scanned. A file whose name is
+    indexed with the same contents (SHA-256) is skipped, and only those files are hashed; the
+    others are computed by `compute_many` and added as `Entry` (name, the name of the folder
+    holding the file as label, absolute path). The writer commits every ``commit_every``
+    meshes and every 30 s, so a killed job keeps what it committed; the caller's ``with
+    writer`` commits the rest. Memory holds the files in flight, not the folder (and, when
+    several paths are given, the names seen, to refuse a name taken twice).
 
     Parameters
     ----------
@@ -155,8 +160,9 @@ def index_meshes(
     commit_every : int
         Meshes between commits.
     progress : callable, optional
-        ``progress(outcomes, total)`` wraps the iterator of `Outcome` (``total`` files to
-        compute, in completion order) and yields the same outcomes, e.g. to show a progress bar.
+        ``progress(outcomes, total)`` wraps the iterator of `Outcome` (in completion order) and
+        yields the same outcomes, e.g. to show a progress bar; ``total()`` is the number of
+        files to compute found so far.
 
     Returns
     -------
@@ -173,20 +179,29 @@ def index_meshes(
     IndexFileError
         A commit failed.
     """
-    todo: dict[Path, str] = {}  # the files to compute, and their names
-    taken: set[str] = set()
+    roots = list(paths)
+    names: dict[Path, str] = {}  # the files found to compute (those in flight), and their names
+    taken: set[str] | None = set() if len(roots) > 1 else None  # one folder has unique names
     failures: list[str] = []
-    for path, name in find_meshes(paths):
-        if name in taken:
-            failures.append(f"{path}: its name {name!r} is already taken by another file")
-            continue
-        taken.add(name)
-        if not writer.is_current(name, path):
-            todo[path] = name
+    found = 0
+
+    def todo() -> Iterator[Path]:
+        nonlocal found
+        for path, name in find_meshes(roots):
+            if taken is not None and name in taken:
+                failures.append(f"{path}: its name {name!r} is already taken by another file")
+                continue
+            if taken is not None:
+                taken.add(name)
+            if not writer.is_current(name, path):
+                names[path] = name
+                found += 1
+                yield path
+
     added, last_commit = 0, time.monotonic()
-    outcomes = compute_many(todo, writer.params, solver, jobs, scheduler)
-    for path, signature in successes(outcomes, len(todo), failures, strict, progress):
-        writer.add(Entry(todo[path], mesh_label(path), str(path.resolve())), signature)
+    outcomes = compute_many(todo(), writer.params, solver, jobs, scheduler)
+    for path, signature in successes(outcomes, lambda: found, failures, strict, progress):
+        writer.add(Entry(names.pop(path), mesh_label(path), str(path.resolve())), signature)
         added += 1
         if writer.pending >= commit_every or time.monotonic() - last_commit > _COMMIT_SECONDS:
             writer.commit()
@@ -196,7 +211,7 @@ def index_meshes(
 
 def successes(
     outcomes: Iterator[Outcome],
-    total: int,
+    total: Callable[[], int],
     failures: list[str],
     strict: bool = False,
     progress: Progress | None = None,
@@ -207,15 +222,15 @@ def successes(
     ----------
     outcomes : iterator of Outcome
         As `compute_many` yields them.
-    total : int
-        Number of outcomes, for ``progress``.
+    total : callable
+        ``total()`` is the number of outcomes expected so far, for ``progress``.
     failures : list of str
         Appended with the error line of each outcome that failed.
     strict : bool
         Stop at the first outcome that failed.
     progress : callable, optional
         ``progress(outcomes, total)`` wraps the iterator and yields the same outcomes, e.g. to
-        show a progress bar.
+        show a progress bar whose total may grow.
 
     Yields
     ------

@@ -6,9 +6,9 @@ file without a user block, read by the default driver), a block is read from the
 HDF5 in between. With a thread per core this scanned faster than memory-mapping each block,
 though one thread alone reads mapped blocks faster (`docs/query-options.md`). Any
 other layout (compressed, compact, external, non-native byte order, chunks not yet allocated) is
-read through h5py into the same buffer. Reading at fixed offsets is safe because an index file is
-never modified in place: a commit renames a new file over it, and the open file stays the one
-that was opened.
+read through h5py into the same buffer. Reading at fixed offsets is safe because the files of an
+index are never modified: a commit adds a segment file and renames a new manifest into place,
+and a merge deletes the files it replaced, which stay readable through the open file.
 """
 
 from __future__ import annotations

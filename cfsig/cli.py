@@ -248,8 +248,8 @@ def _report_errors(errors: list[str]) -> None:
     "-o",
     "--output",
     required=True,
-    type=_FILE,
-    help="The index file (HDF5); created, or updated with new and changed meshes.",
+    type=_PATH,
+    help="The index (a folder of HDF5 files); created, or updated with new and changed meshes.",
 )
 @_with(_params_options)
 @_descriptor_option
@@ -264,7 +264,7 @@ def _report_errors(errors: list[str]) -> None:
 @_count_option(
     "--commit-every",
     default=200,
-    help="Commit to the index file after this many meshes (and every 30 s).",
+    help="Commit to the index after this many meshes (and every 30 s).",
 )
 def index(
     paths,
@@ -280,7 +280,7 @@ def index(
     strict,
     commit_every,
 ) -> None:
-    """Index mesh files and folders (recursively: OFF, OBJ, PLY, STL) into an HDF5 file.
+    """Index mesh files and folders (recursively: OFF, OBJ, PLY, STL) into an index folder.
 
     Each mesh is stored under its path relative to the folder given, labelled with the name of
     the folder that holds it. Running the command again adds new and changed files only.
@@ -313,7 +313,7 @@ def index(
             added, skipped = index_meshes(
                 writer, paths, solver, jobs, scheduler, strict, commit_every, bar
             )
-        total = len(writer.known)  # after the last commit
+        total = len(writer)  # after the last commit
     except CfsigError as exc:
         _fail(str(exc))
     click.echo(f"{output}: {added} meshes added or updated, {total} in the index")
@@ -322,12 +322,18 @@ def index(
     _report_skipped(skipped, strict)
 
 
-def _progress(iterable, total: int, what: str, routes: Counter[str]):
-    """A tqdm progress bar on standard error, counting the repair routes of what passes."""
+def _progress(iterable, total: Callable[[], int], what: str, routes: Counter[str]):
+    """A tqdm progress bar on standard error, counting the repair routes of what passes.
+
+    Its total is the number of files found so far: it grows while a folder is being scanned.
+    """
     from tqdm import tqdm
 
-    bar = tqdm(iterable, total=total, desc=what, unit="mesh", file=sys.stderr, leave=False)
+    bar = tqdm(iterable, total=total(), desc=what, unit="mesh", file=sys.stderr, leave=False)
     for outcome in bar:
+        if bar.total != total():
+            bar.total = total()
+            bar.refresh()
         if outcome.signature is not None:
             routes[outcome.signature.route] += 1
         yield outcome
@@ -340,7 +346,7 @@ def _format_routes(routes: Counter[str]) -> str:
 
 
 @main.command()
-@click.argument("index_file", type=_FILE)
+@click.argument("index_file", type=_PATH)
 @click.argument("meshes", nargs=-1, required=True, type=_PATH)
 @_count_option("-k", default=20, help="Number of results per query.")
 @_solver_option
@@ -408,7 +414,7 @@ def query(index_file, meshes, k, solver, as_json, png) -> None:
 @click.option(
     "--index",
     "index_file",
-    type=_FILE,
+    type=_PATH,
     help="Evaluate the signatures of an index instead of computing them.",
 )
 @click.option(
@@ -590,6 +596,78 @@ def _format_report(report: RetrievalReport) -> str:
     lines += [f"{name:<16}" + "".join(f"{m[k]:8.3f}" for k in keys) for name, m in rows]
     curve = "  ".join(f"{r:.2f}:{p:.3f}" for r, p in report.precision_recall)
     return "\n".join([*lines, "precision at recall:", curve])
+
+
+@main.command()
+@click.argument("index_file", type=_PATH)
+def check(index_file) -> None:
+    """Verify every checksum of an index and name what is damaged.
+
+    Reads the whole index: the manifest, and each segment's file, signature chunks and
+    columns. Exit status 0 when healthy, 1 when something is damaged (listed) or unreadable.
+
+    \b
+    Example:
+      cfsig check shrec07.h5
+    """
+    from .index import IndexReader, check_index
+
+    try:
+        problems = check_index(index_file)
+        if not problems:
+            with IndexReader(index_file) as reader:
+                rows, segments = len(reader), len(reader.segments)
+    except CfsigError as exc:
+        _fail(str(exc))
+    if problems:
+        click.echo(f"{index_file}: damaged:", err=True)
+        for line in problems:
+            click.echo(f"  {line}", err=True)
+        sys.exit(EXIT_ERROR)
+    click.echo(f"{index_file}: healthy ({rows} entries in {segments} segment(s))")
+
+
+@main.command()
+@click.argument("index_file", type=_PATH)
+def compact(index_file) -> None:
+    """Merge an index's segments into one, dropping superseded rows.
+
+    Commits merge small segments automatically; this merges everything, checking each
+    segment's checksums as it reads it. Safe to kill: the index stays as it was until the new
+    segment is published. Readers keep answering meanwhile.
+
+    \b
+    Example:
+      cfsig compact shrec07.h5
+    """
+    from .index import compact_index
+
+    try:
+        before, rows = compact_index(index_file)
+    except CfsigError as exc:
+        _fail(str(exc))
+    click.echo(f"{index_file}: {before} segment(s) merged into 1, {rows} entries")
+
+
+@main.command()
+@click.argument("old", type=_PATH)
+@click.argument("new", type=_PATH)
+def convert(old, new) -> None:
+    """Write an index of an older format (one HDF5 file) as a new index in this format.
+
+    OLD is left unchanged; NEW must not exist.
+
+    \b
+    Example:
+      cfsig convert shrec07-v1.h5 shrec07.h5
+    """
+    from .index import convert_index
+
+    try:
+        rows = convert_index(old, new)
+    except CfsigError as exc:
+        _fail(str(exc))
+    click.echo(f"{new}: {rows} entries converted from {old}")
 
 
 @main.command()

@@ -173,7 +173,7 @@ def compute_collection(
         raise MeshError(f"{folder}: no mesh files")
     failures: list[str] = []
     outcomes = compute_many(found, params, solver, jobs)
-    signatures = dict(successes(outcomes, len(found), failures, strict, progress))
+    signatures = dict(successes(outcomes, lambda: len(found), failures, strict, progress))
     order = [path for path in found if path in signatures]
     names = tuple(found[path] for path in order)
     rows = np.array([signatures[path].vector for path in order])
@@ -193,7 +193,7 @@ def collection_from_index(path: str | os.PathLike) -> tuple[str, Collection]:
     Parameters
     ----------
     path : str or os.PathLike
-        The HDF5 index file.
+        The index (a folder, or a format-1 file).
 
     Returns
     -------

@@ -1,14 +1,18 @@
-"""The index: signatures and their metadata in one HDF5 file that is never left half-written.
+"""The index: a folder of immutable segment files behind a small manifest replaced atomically.
 
-Layout (format version 1): datasets of one row per mesh, ``signatures`` (N, length) float32,
-``names``, ``labels``, ``paths`` (UTF-8 strings), ``sha256`` (64 ASCII bytes), ``n_vertices``,
-``n_faces``, ``n_components`` (int64), ``phi_min``, ``phi_max``, ``curvature_error`` (float64);
-file attributes ``format`` ("cfsig-index"), ``format_version``, ``params`` (`Params` as JSON)
-and ``cfsig_version``.
+Layout (format version 2, docs/index-format.md): ``INDEX/manifest.h5`` holds the header
+(``format`` "cfsig-index", ``format_version``, ``params`` as JSON, ``cfsig_version``) and the
+list of segments with their row counts and file checksums; each ``INDEX/seg-NNNNNNNN.h5``
+(`cfsig.segments`) holds the rows of one commit, or of several merged by compaction. A commit
+writes one new segment, syncs it to disk and renames a new manifest over the old one: it costs
+the rows it adds, whatever the size of the index. A name added again supersedes its older row,
+which readers skip until compaction drops it. Segments pile up and are merged eight at a time
+(`MERGE_FANOUT`), so a row is copied a few times in its life, not at every commit.
 
-Writes are copy-on-write: a commit copies the file, appends to the copy, syncs it to disk and
-renames it over the original, so a reader, or a process killed at any moment, only ever sees a
-complete committed state. One writer at a time holds an exclusive lock on ``INDEX.lock``.
+A process killed at any moment leaves the manifest of the previous or of the new commit; files
+it left that no manifest names are removed by the next writer. One writer at a time holds an
+exclusive lock on ``INDEX.lock`` beside the folder. Format-1 indexes (one HDF5 file) are read as
+one segment; `convert_index` writes them in this layout.
 
 cfsig runs on POSIX systems (Linux, macOS): the lock is ``flock`` and queries read with
 ``preadv``. ``fcntl`` is imported by the writer only, so that this module imports anywhere.
@@ -17,9 +21,13 @@ cfsig runs on POSIX systems (Linux, macOS): the lock is ``flock`` and queries re
 from __future__ import annotations
 
 import hashlib
+import json
+import math
 import os
 import shutil
-from dataclasses import dataclass
+import zlib
+from collections.abc import Iterable
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
@@ -29,23 +37,27 @@ import numpy as np
 from . import __version__
 from .errors import IndexFileError
 from .params import Params, signature_length
+from .segments import (
+    COLUMNS,
+    META,
+    SEGMENT_FORMAT,
+    STRING,
+    TEXT,
+    Piece,
+    name_keys,
+    scan_segment,
+    write_segment,
+)
 
 if TYPE_CHECKING:  # importing the signature code would load scipy on the query path
     from .signature import Signature
 
 FORMAT = "cfsig-index"
-FORMAT_VERSION = 1
-_STRING = h5py.string_dtype("utf-8")
-_META = {
-    "n_vertices": np.int64,
-    "n_faces": np.int64,
-    "n_components": np.int64,
-    "phi_min": np.float64,
-    "phi_max": np.float64,
-    "curvature_error": np.float64,
-}
-_TEXT = ("names", "labels", "paths")
-_CHUNK_ROWS = 4096
+FORMAT_VERSION = 2
+MANIFEST = "manifest.h5"
+MERGE_FANOUT = 8  # segments of one size class merged into one: each row is copied log8(N) times
+_OPEN_ATTEMPTS = 5  # a reader retries when a compaction removed a segment it was about to open
+_CRC_BLOCK = 1 << 24
 
 
 @dataclass(frozen=True)
@@ -67,13 +79,80 @@ class Entry:
     path: str
 
 
+@dataclass(frozen=True)
+class SegmentInfo:
+    """A segment as the manifest lists it.
+
+    Attributes
+    ----------
+    id : int
+        Its number, never reused; the file is ``seg-<id, 8 digits>.h5``.
+    rows : int
+        Rows in the file.
+    live : int
+        Rows not superseded by a later segment.
+    crc32 : int
+        CRC-32 of the whole file.
+    """
+
+    id: int
+    rows: int
+    live: int
+    crc32: int
+
+    @property
+    def file(self) -> str:
+        """The segment's file name in the index folder."""
+        return f"seg-{self.id:08d}.h5"
+
+
+@dataclass(frozen=True)
+class Manifest:
+    """The committed state of an index.
+
+    Attributes
+    ----------
+    params : Params
+        Parameters of every signature in it.
+    segments : tuple of SegmentInfo
+        Oldest first; rows are numbered segment after segment.
+    next_id : int
+        Number of the next segment to write.
+    """
+
+    params: Params
+    segments: tuple[SegmentInfo, ...]
+    next_id: int
+
+
+@dataclass(frozen=True)
+class SegmentView:
+    """An open segment as a reader scans it.
+
+    Attributes
+    ----------
+    signatures : h5py.Dataset
+        (rows, length) float32.
+    start : int
+        Number of rows, superseded ones included, in the segments before this one.
+    dead : (d,) int64
+        Sorted rows of this segment superseded by later ones.
+    """
+
+    signatures: h5py.Dataset
+    start: int
+    dead: np.ndarray
+
+
 class IndexReader:
-    """Read access to an index file; use as a context manager.
+    """Read access to an index (a folder, or a format-1 file); use as a context manager.
+
+    Rows are numbered from 0 over the rows that are not superseded, segment after segment.
 
     Parameters
     ----------
     path : str or path-like
-        The index file.
+        The index.
 
     Raises
     ------
@@ -83,13 +162,47 @@ class IndexReader:
 
     def __init__(self, path: str | os.PathLike) -> None:
         self.path = Path(path)
-        self._file = _open_h5(self.path)
+        self._files: list[h5py.File] = []
         try:
-            self.params = _check_header(self._file, self.path)
-        except IndexFileError:
-            self._file.close()
+            self.params, self.segments = self._open()
+        except BaseException:
+            self.close()
             raise
-        self.signatures: h5py.Dataset = self._file["signatures"]
+        self._dead = np.concatenate(
+            [np.zeros(0, np.int64), *(s.start + s.dead for s in self.segments)]
+        )
+        rows = [s.signatures.shape[0] for s in self.segments]
+        self.physical_rows = int(sum(rows))
+        self._live_starts = np.cumsum(
+            [0] + [r - len(s.dead) for r, s in zip(rows, self.segments, strict=True)]
+        )
+        self.signatures = Signatures(self)
+
+    def _open(self) -> tuple[Params, list[SegmentView]]:
+        """Open the manifest and its segments, or the format-1 file."""
+        if self.path.is_file():
+            f = _open_h5(self.path)
+            self._files.append(f)
+            params, version = _check_header(f, self.path)
+            if version >= 2:
+                raise IndexFileError(f"{self.path}: the manifest of an index: name its folder")
+            return params, [SegmentView(f["signatures"], 0, np.zeros(0, np.int64))]
+        for attempt in range(_OPEN_ATTEMPTS):
+            manifest = read_manifest(self.path)
+            missing = [s for s in manifest.segments if not (self.path / s.file).is_file()]
+            if missing and attempt + 1 < _OPEN_ATTEMPTS:
+                continue  # a compaction replaced them after we read the manifest
+            if missing:
+                raise IndexFileError(f"{self.path}: segment {missing[0].file} is missing")
+            files = [_open_segment(self.path, s) for s in manifest.segments]
+            self._files += files
+            dead = _dead_rows(manifest.segments, files, self.path)
+            views, start = [], 0
+            for info, f in zip(manifest.segments, files, strict=True):
+                views.append(SegmentView(f["signatures"], start, dead[info.id]))
+                start += info.rows
+            return manifest.params, views
+        raise AssertionError("unreachable")  # pragma: no cover
 
     def __enter__(self) -> IndexReader:
         return self
@@ -98,11 +211,59 @@ class IndexReader:
         self.close()
 
     def __len__(self) -> int:
-        return int(self.signatures.shape[0])
+        return int(self._live_starts[-1])
 
     def close(self) -> None:
-        """Close the file."""
-        self._file.close()
+        """Close the files."""
+        for f in self._files:
+            f.close()
+        self._files = []
+
+    def logical_rows(self, physical: np.ndarray) -> np.ndarray:
+        """Row numbers of rows given by their position among all rows, superseded ones included.
+
+        Parameters
+        ----------
+        physical : (k,) int
+            ``SegmentView.start`` plus the row in the segment, of rows not superseded.
+
+        Returns
+        -------
+        rows : (k,) int64
+        """
+        physical = np.asarray(physical, np.int64)
+        return physical - np.searchsorted(self._dead, physical)
+
+    def _locate(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The segment and the row in it of some row numbers."""
+        rows = np.asarray(rows, np.int64)
+        if rows.size and (rows.min() < 0 or rows.max() >= len(self)):
+            raise IndexError(f"row out of range for an index of {len(self)}")
+        seg = np.searchsorted(self._live_starts, rows, side="right") - 1
+        local = rows - self._live_starts[seg]
+        for i, view in enumerate(self.segments):
+            if len(view.dead) and (mine := seg == i).any():
+                skips = view.dead - np.arange(len(view.dead))
+                local[mine] += np.searchsorted(skips, local[mine], side="right")
+        return seg, local
+
+    def _gather(self, key: str, rows: np.ndarray) -> np.ndarray:
+        """Values of one dataset at some row numbers, reading only those rows."""
+        seg, local = self._locate(rows)
+        parts = []
+        for i in np.unique(seg):
+            data = self.segments[i].signatures.file[key]
+            want = local[seg == i]
+            order = np.unique(want)
+            run = order[-1] - order[0] + 1 == len(order)  # one slice reads faster than a list
+            picked = slice(int(order[0]), int(order[-1]) + 1) if run else order
+            read = data.asstr()[picked] if data.dtype.kind == "O" else data[picked]
+            parts.append((np.flatnonzero(seg == i), read[np.searchsorted(order, want)]))
+        width = self.signatures.shape[1:] if key == "signatures" else ()
+        out = np.empty((len(rows), *width), object if not parts else parts[0][1].dtype)
+        for where, values in parts:
+            out[where] = values
+        return out
 
     def entries(self, rows: np.ndarray) -> list[Entry]:
         """Names, labels and paths of some rows, reading only those rows.
@@ -118,10 +279,8 @@ class IndexReader:
             In the order of ``rows``.
         """
         rows = np.asarray(rows, dtype=np.int64)
-        order = np.unique(rows)
-        columns = [self._file[key].asstr()[order] if len(order) else [] for key in _TEXT]
-        found = {int(r): Entry(*map(str, vals)) for r, *vals in zip(order, *columns, strict=True)}
-        return [found[int(r)] for r in rows]
+        columns = [self._gather(key, rows) for key in TEXT]
+        return [Entry(*map(str, values)) for values in zip(*columns, strict=True)]
 
     def column(self, key: str) -> np.ndarray:
         """A whole column: ``"names"``, ``"labels"``, ``"paths"``, ``"sha256"`` or a metadata key.
@@ -136,48 +295,96 @@ class IndexReader:
         values : (N,) ndarray
             Strings as Python ``str`` objects.
         """
-        data = self._file[key]
-        return data.asstr()[:] if data.dtype.kind in "OS" else data[:]
+        parts = []
+        for view in self.segments:
+            data = view.signatures.file[key]
+            values = data.asstr()[:] if data.dtype.kind in "OS" else data[:]
+            parts.append(np.delete(values, view.dead))
+        return np.concatenate(parts) if parts else np.zeros(0, META.get(key, object))
+
+
+class Signatures:
+    """The signatures of an `IndexReader`, indexed like an array of shape (N, length).
+
+    Parameters
+    ----------
+    reader : IndexReader
+        The open index.
+    """
+
+    def __init__(self, reader: IndexReader) -> None:
+        self._reader = reader
+        self.shape = (len(reader), signature_length(reader.params))
+        self.dtype = np.dtype(np.float32)
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __getitem__(self, key: int | slice | np.ndarray) -> np.ndarray:
+        """Rows by number, slice or array of numbers: (length,) or (k, length) float32."""
+        if isinstance(key, (int, np.integer)):
+            return self[np.array([key])][0]
+        rows = np.arange(len(self))[key] if isinstance(key, slice) else np.asarray(key)
+        return (
+            self._reader._gather("signatures", rows).astype(np.float32).reshape(-1, self.shape[1])
+        )
+
+    def __array__(self, dtype: None = None, copy: object = None) -> np.ndarray:
+        return self[:]
 
 
 class IndexWriter:
     """Add signatures to an index, creating it if needed; use as a context manager.
 
     Records are buffered and written by `commit`, atomically. Leaving the ``with`` block
-    commits what is left, also on an exception.
+    commits what is left, also on an exception. Opening reads only the manifest; the keys of
+    the names (12 bytes a row) are read when a name is first looked up.
 
     Parameters
     ----------
     path : str or path-like
-        The index file.
+        The index folder.
     params : Params
         Parameters of the signatures to add; an existing index must have been built with equal
         parameters.
+    merge : bool
+        Merge segments automatically after commits (`MERGE_FANOUT`).
 
     Raises
     ------
     IndexFileError
-        Another process is writing the index, or the existing file is corrupt, foreign, of a
-        newer format or built with other parameters.
+        Another process is writing the index, or the existing index is corrupt, foreign, of
+        another or a newer format, or built with other parameters.
     """
 
-    def __init__(self, path: str | os.PathLike, params: Params) -> None:
+    def __init__(self, path: str | os.PathLike, params: Params, merge: bool = True) -> None:
         self.path = Path(path)
         self.params = params
+        self.merge = merge
         self._lock = _acquire_lock(self.path)
-        for stale in self.path.parent.glob(f".{self.path.name}.*.tmp"):
-            stale.unlink()  # left by a writer that was killed: only the lock holder makes these
-        self._pending: list[tuple[Entry, Signature]] = []
-        self.known: dict[str, tuple[int, str]] = {}
-        if self.path.exists():
-            with IndexReader(self.path) as reader:
-                if reader.params != params:
-                    self._lock.close()
+        try:
+            self._manifest = Manifest(params, (), 1)
+            if self.path.is_file():
+                with IndexReader(self.path):  # refuses foreign and newer files first
+                    pass
+                raise IndexFileError(
+                    f"{self.path}: an index of format 1: convert it with "
+                    f"`cfsig convert {self.path} NEW` to add to it"
+                )
+            if self.path.exists():
+                self._manifest = read_manifest(self.path)
+                if self._manifest.params != params:
                     raise IndexFileError(
-                        f"{self.path}: built with other parameters ({reader.params.to_json()})"
+                        f"{self.path}: built with other parameters "
+                        f"({self._manifest.params.to_json()})"
                     )
-                names, hashes = reader.column("names"), reader.column("sha256")
-            self.known = {n: (i, h) for i, (n, h) in enumerate(zip(names, hashes, strict=True))}
+                self._remove_orphans()
+        except BaseException:
+            self._lock.close()
+            raise
+        self._pending: list[tuple[Entry, Signature]] = []
+        self._keys: dict[int, _Keys] | None = None
+        self._files: dict[int, h5py.File] = {}
 
     def __enter__(self) -> IndexWriter:
         return self
@@ -186,7 +393,22 @@ class IndexWriter:
         try:
             self.commit()
         finally:
-            self._lock.close()
+            self.close()
+
+    def __len__(self) -> int:
+        return sum(s.live for s in self._manifest.segments)
+
+    def close(self) -> None:
+        """Release the lock and close the segment files (without committing)."""
+        for f in self._files.values():
+            f.close()
+        self._files.clear()
+        self._lock.close()
+
+    @property
+    def segments(self) -> tuple[SegmentInfo, ...]:
+        """The committed segments, oldest first."""
+        return self._manifest.segments
 
     def is_current(self, name: str, path: str | os.PathLike) -> bool:
         """Whether ``name`` is already indexed with the current contents of ``path``.
@@ -202,13 +424,14 @@ class IndexWriter:
         -------
         current : bool
         """
-        if name not in self.known:
+        (found,) = self._find([name])
+        if found is None:
             return False
         try:
             digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
         except OSError:
             return False
-        return self.known[name][1] == digest
+        return bytes(self._file(found[0])["sha256"][found[1]]).decode() == digest
 
     def add(self, entry: Entry, signature: Signature) -> None:
         """Queue one mesh for the next commit; an existing entry of that name is replaced.
@@ -228,95 +451,461 @@ class IndexWriter:
         return len(self._pending)
 
     def commit(self) -> None:
-        """Write the queued records atomically (copy, append, fsync, rename)."""
+        """Write the queued records as one new segment and publish it (fsync, rename).
+
+        Then merges segments if enough of one size class have piled up (see `merge`).
+        """
         if not self._pending and self.path.exists():
             return
-        tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
-        try:
-            if self.path.exists():
-                shutil.copyfile(self.path, tmp)
-            with h5py.File(tmp, "a") as f:
-                if "signatures" not in f:
-                    _create_layout(f, self.params)
-                self._write_rows(f)
-            _fsync(tmp)
-            os.replace(tmp, self.path)
-            _fsync(self.path.parent)
-        except BaseException:
-            tmp.unlink(missing_ok=True)
-            raise
-        self._pending.clear()
-
-    def _write_rows(self, f: h5py.File) -> None:
-        """Append new names and overwrite changed ones in an open file."""
         latest = {entry.name: (entry, sig) for entry, sig in self._pending}
+        if not self.path.exists():
+            self._create()
         if not latest:
             return
-        rows = []
-        for name, (_, sig) in latest.items():
-            row = self.known.get(name, (len(self.known), ""))[0]
-            self.known[name] = (row, sig.sha256)
-            rows.append(row)
-        for key in f:
-            f[key].resize(len(self.known), axis=0)
-        order = np.argsort(rows)
-        records = list(latest.values())
-        picks = [records[i] for i in order]
-        columns = {
-            "signatures": np.array([s.vector for _, s in picks], dtype=np.float32),
-            "names": [e.name for e, _ in picks],
-            "labels": [e.label for e, _ in picks],
-            "paths": [e.path for e, _ in picks],
-            "sha256": np.array([s.sha256.encode() for _, s in picks], dtype="S64"),
-            "n_vertices": [s.n_vertices for _, s in picks],
-            "n_faces": [s.n_faces for _, s in picks],
-            "n_components": [s.n_components for _, s in picks],
-            "phi_min": [s.phi_range[0] for _, s in picks],
-            "phi_max": [s.phi_range[1] for _, s in picks],
-            "curvature_error": [s.curvature_error for _, s in picks],
-        }
-        for key, values in columns.items():
-            f[key][np.asarray(rows)[order]] = np.asarray(values, dtype=f[key].dtype)
+        found = self._find(list(latest))
+        drops = np.array([loc for loc in found if loc is not None], np.int64).reshape(-1, 2)
+        piece = _piece(list(latest.values()), signature_length(self.params))
+        self._write([piece], len(latest), drops, len(self.segments))
+        self._pending.clear()
+        if self.merge:
+            while (start := _merge_start(self.segments)) is not None:
+                self._merge(start)
+
+    def compact(self) -> None:
+        """Merge every segment into one, leaving out superseded rows; commits pending records.
+
+        Raises
+        ------
+        IndexFileError
+            A segment is damaged (its checksums do not match): nothing is changed.
+        """
+        self.commit()
+        if len(self.segments) > 1 or any(s.live < s.rows for s in self.segments):
+            self._merge(0)
+
+    def _merge(self, start: int) -> None:
+        """Replace the segments from ``start`` on by one holding their live rows."""
+        run = self.segments[start:]
+        inside = {s.id for s in run}
+        # The run ends the list: the rows of it that are superseded are named by its own drops.
+        dead = _dead_rows(run, [self._file(s.id) for s in run], self.path)
+        kept = [self._file(s.id)["drops"][:] for s in run]
+        drops = np.concatenate([np.zeros((0, 2), np.int64), *kept])
+        drops = drops[~np.isin(drops[:, 0], list(inside))]  # rows of older segments stay dropped
+        pieces = (p for s in run for p in scan_segment(self._file(s.id), dead[s.id]))
+        self._write(pieces, sum(s.live for s in run), drops, start, new=False)
+
+    def _write(
+        self, pieces: Iterable[Piece], rows: int, drops: np.ndarray, start: int, new: bool = True
+    ) -> None:
+        """Write a segment and publish a manifest where it replaces the segments from ``start``.
+
+        ``drops`` are the rows of older segments it supersedes: newly (a commit), or already
+        (a merge, which carries them over).
+        """
+        old = self._manifest
+        info = SegmentInfo(old.next_id, rows, rows, 0)
+        path = self.path / info.file
+        try:
+            write_segment(path, info.id, signature_length(self.params), rows, pieces, drops)
+            _fsync(path)
+            info = replace(info, crc32=file_crc(path))
+            ids, dropped = np.unique(drops[:, 0] if new else [], return_counts=True)
+            counts = {int(s): int(n) for s, n in zip(ids, dropped, strict=True)}
+            older = [replace(s, live=s.live - counts.get(s.id, 0)) for s in old.segments[:start]]
+            manifest = Manifest(self.params, (*older, info), info.id + 1)
+            write_manifest(self.path, manifest)
+        except BaseException:
+            path.unlink(missing_ok=True)
+            raise
+        self._manifest = manifest
+        for s in old.segments[start:]:
+            if (f := self._files.pop(s.id, None)) is not None:
+                f.close()
+            (self.path / s.file).unlink(missing_ok=True)
+        if self._keys is not None:  # the keys of the segments kept stay as they are
+            for s in old.segments[start:]:
+                del self._keys[s.id]
+            for seg, row in drops if new else ():
+                self._keys[int(seg)].dead.add(int(row))
+            self._keys[info.id] = _Keys.read(self._file(info.id))
+
+    def _create(self) -> None:
+        """Create the folder with an empty manifest, atomically: made aside, then renamed."""
+        tmp = self.path.with_name(f".{self.path.name}.new")
+        shutil.rmtree(tmp, ignore_errors=True)  # left by a writer killed here
+        tmp.mkdir()
+        write_manifest(tmp, self._manifest)
+        os.rename(tmp, self.path)
+        _fsync(self.path.parent)
+
+    def _find(self, names: list[str]) -> list[tuple[int, int] | None]:
+        """The committed (segment, row) of each name, or None for a new name."""
+        if not names or not self.segments:
+            return [None] * len(names)
+        if self._keys is None:
+            files = [self._file(s.id) for s in self.segments]
+            dead = _dead_rows(self.segments, files, self.path)
+            self._keys = {
+                s.id: _Keys.read(f, dead[s.id]) for s, f in zip(self.segments, files, strict=True)
+            }
+        keys = name_keys(names)
+        found: list[tuple[int, int] | None] = [None] * len(names)
+        for s in reversed(self.segments):
+            table = self._keys[s.id]
+            low = np.searchsorted(table.sorted, keys, "left")
+            high = np.searchsorted(table.sorted, keys, "right")
+            for i in np.flatnonzero(high > low):
+                if found[i] is not None:
+                    continue
+                for row in table.rows[low[i] : high[i]]:
+                    named = self._file(s.id)["names"].asstr()[int(row)]
+                    if row not in table.dead and named == names[i]:
+                        found[i] = (s.id, int(row))
+        return found
+
+    def _file(self, segment: int) -> h5py.File:
+        """An open segment, kept open while the writer lives."""
+        if segment not in self._files:
+            info = next(s for s in self.segments if s.id == segment)
+            self._files[segment] = _open_segment(self.path, info)
+        return self._files[segment]
+
+    def _remove_orphans(self) -> None:
+        """Delete what killed writers left: files no manifest names (only the lock holder may)."""
+        named = {s.file for s in self.segments}
+        for stale in [*self.path.glob("seg-*.h5"), *self.path.glob("*.tmp")]:
+            if stale.name not in named:
+                stale.unlink()
 
 
-def _create_layout(f: h5py.File, params: Params) -> None:
-    """Create the empty datasets and the header attributes."""
-    f.attrs.update(
-        format=FORMAT,
-        format_version=FORMAT_VERSION,
-        params=params.to_json(),
-        cfsig_version=__version__,
+@dataclass
+class _Keys:
+    """The sorted name keys of one segment, the row of each, and its superseded rows."""
+
+    sorted: np.ndarray
+    rows: np.ndarray
+    dead: set[int]
+
+    @classmethod
+    def read(cls, f: h5py.File, dead: Iterable[int] = ()) -> _Keys:
+        return cls(f["key_sorted"][:], f["key_rows"][:], set(map(int, dead)))
+
+
+def read_manifest(path: Path) -> Manifest:
+    """Read and check an index folder's manifest.
+
+    Parameters
+    ----------
+    path : Path
+        The index folder.
+
+    Returns
+    -------
+    manifest : Manifest
+
+    Raises
+    ------
+    IndexFileError
+        No manifest, not HDF5, not a cfsig index, newer, or its checksum does not match.
+    """
+    file = path / MANIFEST
+    if not path.is_dir():
+        raise IndexFileError(f"{path}: no such index")
+    if not file.is_file():
+        raise IndexFileError(f"{path}: not a cfsig index (no {MANIFEST})")
+    with _open_h5(file, path) as f:
+        params, _ = _check_header(f, path)
+        try:
+            columns = [
+                f[k][:] for k in ("segment_ids", "segment_rows", "segment_live", "segment_crc32")
+            ]
+            manifest = Manifest(
+                params,
+                tuple(SegmentInfo(*map(int, row)) for row in zip(*columns, strict=True)),
+                int(f.attrs["next_segment"]),
+            )
+            crc = int(f.attrs["crc32"])
+        except (KeyError, ValueError, OSError) as exc:
+            raise IndexFileError(f"{path}: unreadable manifest ({exc})") from None
+    if crc != _manifest_crc(manifest):
+        raise IndexFileError(f"{path}: the manifest is damaged (checksum mismatch)")
+    return manifest
+
+
+def write_manifest(path: Path, manifest: Manifest) -> None:
+    """Publish a manifest atomically: write a temporary file, sync it, rename it, sync the folder.
+
+    Parameters
+    ----------
+    path : Path
+        The index folder.
+    manifest : Manifest
+        What to publish.
+    """
+    tmp = path / (MANIFEST + ".tmp")
+    segments = manifest.segments
+    with h5py.File(tmp, "w") as f:
+        f.attrs.update(
+            format=FORMAT,
+            format_version=FORMAT_VERSION,
+            params=manifest.params.to_json(),
+            cfsig_version=__version__,
+            next_segment=manifest.next_id,
+            crc32=np.uint32(_manifest_crc(manifest)),
+        )
+        f.create_dataset("segment_files", data=[s.file for s in segments], dtype=STRING)
+        for name, key in (
+            ("segment_ids", "id"),
+            ("segment_rows", "rows"),
+            ("segment_live", "live"),
+        ):
+            f.create_dataset(name, data=np.array([getattr(s, key) for s in segments], np.int64))
+        f.create_dataset("segment_crc32", data=np.array([s.crc32 for s in segments], np.uint32))
+    _fsync(tmp)
+    os.replace(tmp, path / MANIFEST)
+    _fsync(path)
+
+
+def _manifest_crc(manifest: Manifest) -> int:
+    """CRC-32 of what a manifest says, as canonical JSON."""
+    text = json.dumps(
+        [
+            manifest.params.to_json(),
+            manifest.next_id,
+            [list(vars(s).values()) for s in manifest.segments],
+        ]
     )
-    width = signature_length(params)
-    f.create_dataset(
-        "signatures", (0, width), np.float32, maxshape=(None, width), chunks=(_CHUNK_ROWS, width)
+    return zlib.crc32(text.encode())
+
+
+def _merge_start(segments: tuple[SegmentInfo, ...]) -> int | None:
+    """Where the trailing run of small segments to merge starts, if one has piled up.
+
+    The run is the segments at the end no larger, in size class (log base `MERGE_FANOUT` of
+    the live rows), than the last one; it is merged once it has `MERGE_FANOUT` segments.
+    """
+
+    def size_class(s: SegmentInfo) -> int:
+        return int(math.log(max(s.live, 1), MERGE_FANOUT))
+
+    last = size_class(segments[-1]) if segments else 0
+    start = len(segments)
+    while start and size_class(segments[start - 1]) <= last:
+        start -= 1
+    return start if len(segments) - start >= MERGE_FANOUT else None
+
+
+def _dead_rows(
+    segments: Iterable[SegmentInfo], files: Iterable[h5py.File], path: Path
+) -> dict[int, np.ndarray]:
+    """The superseded rows of each segment (sorted), from the drops of all; checks the counts."""
+    infos, files = list(segments), list(files)
+    found: dict[int, list[np.ndarray]] = {s.id: [] for s in infos}
+    for f in files:
+        drops = f["drops"][:]
+        for seg in np.unique(drops[:, 0]):
+            if int(seg) in found:
+                found[int(seg)].append(drops[drops[:, 0] == seg, 1])
+    dead = {
+        s: np.unique(np.concatenate([np.zeros(0, np.int64), *rows])) for s, rows in found.items()
+    }
+    for s in infos:
+        if s.rows - len(dead[s.id]) != s.live:
+            raise IndexFileError(f"{path}: segment {s.file} does not match the manifest")
+    return dead
+
+
+def _piece(records: list[tuple[Entry, Signature]], width: int) -> Piece:
+    """The rows of some records, as `write_segment` takes them."""
+    sigs = [s for _, s in records]
+    phi = np.array([s.phi_range for s in sigs], np.float64).reshape(-1, 2)
+    return {
+        "signatures": np.array([s.vector for s in sigs], np.float32).reshape(-1, width),
+        "names": np.array([e.name for e, _ in records], object),
+        "labels": np.array([e.label for e, _ in records], object),
+        "paths": np.array([e.path for e, _ in records], object),
+        "sha256": np.array([s.sha256.encode() for s in sigs], "S64"),
+        "n_vertices": np.array([s.n_vertices for s in sigs], np.int64),
+        "n_faces": np.array([s.n_faces for s in sigs], np.int64),
+        "n_components": np.array([s.n_components for s in sigs], np.int64),
+        "phi_min": phi[:, 0],
+        "phi_max": phi[:, 1],
+        "curvature_error": np.array([s.curvature_error for s in sigs], np.float64),
+    }
+
+
+def check_index(path: str | os.PathLike) -> list[str]:
+    """Verify every checksum of an index: the manifest, each segment file, chunk and column.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The index folder.
+
+    Returns
+    -------
+    problems : list of str
+        One line per damaged part, naming the file and the part; empty for a healthy index.
+
+    Raises
+    ------
+    IndexFileError
+        Not an index this cfsig reads, a damaged manifest, or a format-1 file (which has no
+        checksums).
+    """
+    path = Path(path)
+    if path.is_file():
+        with IndexReader(path):
+            pass
+        raise IndexFileError(f"{path}: a format-1 index has no checksums: convert it first")
+    manifest = read_manifest(path)
+    problems = []
+    for info in manifest.segments:
+        file = path / info.file
+        if not file.is_file():
+            problems.append(f"{file}: missing")
+            continue
+        found: list[str] = []
+        try:
+            with _open_segment(path, info) as f:
+                for _ in scan_segment(f, np.zeros(0, np.int64), found):
+                    pass
+        except (OSError, KeyError, ValueError, IndexFileError) as exc:
+            found.append(f"unreadable ({exc})")
+        if not found and file_crc(file) != info.crc32:
+            found.append("file checksum mismatch outside the rows (HDF5 structure)")
+        problems += [f"{file}: {p}" for p in found]
+    if not problems:
+        files = [_open_segment(path, s) for s in manifest.segments]
+        try:
+            _dead_rows(manifest.segments, files, path)
+        except IndexFileError as exc:
+            problems.append(str(exc))
+        finally:
+            for f in files:
+                f.close()
+    return problems
+
+
+def compact_index(path: str | os.PathLike) -> tuple[int, int]:
+    """Merge every segment of an index into one (`IndexWriter.compact`).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The index folder.
+
+    Returns
+    -------
+    segments : int
+        Segments before.
+    rows : int
+        Entries in the index.
+
+    Raises
+    ------
+    IndexFileError
+        The index is unusable, damaged, or another process is writing it.
+    """
+    path = Path(path)
+    with IndexWriter(path, read_manifest(path).params) as writer:
+        before = len(writer.segments)
+        writer.compact()
+        return before, len(writer)
+
+
+def convert_index(source: str | os.PathLike, target: str | os.PathLike) -> int:
+    """Write the rows of an index (format 1 or 2) as a new index of this format, in one segment.
+
+    Parameters
+    ----------
+    source : str or path-like
+        The index to read; left unchanged.
+    target : str or path-like
+        The new index folder; must not exist.
+
+    Returns
+    -------
+    rows : int
+        Rows written.
+
+    Raises
+    ------
+    IndexFileError
+        ``source`` is unusable or damaged, or ``target`` exists.
+    """
+    target = Path(target)
+    if target.exists():
+        raise IndexFileError(f"{target}: already exists")
+    with IndexReader(source) as reader, IndexWriter(target, reader.params, merge=False) as writer:
+        writer.commit()  # creates the empty index
+        pieces = (
+            p for view in reader.segments for p in scan_segment(view.signatures.file, view.dead)
+        )
+        writer._write(pieces, len(reader), np.zeros((0, 2), np.int64), 0)
+        return len(reader)
+
+
+def file_crc(path: Path) -> int:
+    """CRC-32 of a whole file, read in blocks of 16 MiB.
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+
+    Returns
+    -------
+    crc : int
+    """
+    crc = 0
+    with open(path, "rb") as f:
+        while block := f.read(_CRC_BLOCK):
+            crc = zlib.crc32(block, crc)
+    return crc
+
+
+def _open_segment(folder: Path, info: SegmentInfo) -> h5py.File:
+    """Open a segment read-only and check that it is the one the manifest lists."""
+    f = _open_h5(folder / info.file, folder)
+    ok = (
+        f.attrs.get("format") == SEGMENT_FORMAT
+        and int(f.attrs.get("segment", -1)) == info.id
+        and all(k in f for k in ("signatures", "drops", *COLUMNS))
+        and f["signatures"].shape[0] == info.rows
     )
-    dtypes = {**{k: _STRING for k in _TEXT}, "sha256": "S64", **_META}
-    for key, dtype in dtypes.items():
-        f.create_dataset(key, (0,), dtype, maxshape=(None,), chunks=(_CHUNK_ROWS,))
+    if not ok:
+        f.close()
+        raise IndexFileError(f"{folder}: segment {info.file} does not match the manifest")
+    return f
 
 
-def _open_h5(path: Path) -> h5py.File:
-    """Open an HDF5 file read-only, turning failures into `IndexFileError`."""
+def _open_h5(path: Path, index: Path | None = None) -> h5py.File:
+    """Open an HDF5 file read-only, turning failures into `IndexFileError` naming the index."""
+    name = index or path
     if not path.is_file():
-        raise IndexFileError(f"{path}: no such index file")
+        raise IndexFileError(f"{name}: no such index file")
     try:
         return h5py.File(path, "r", locking=False)
     except OSError as exc:
-        raise IndexFileError(f"{path}: not a readable HDF5 file ({exc})") from None
+        where = "" if index is None else f" ({path.name})"
+        raise IndexFileError(f"{name}: not a readable HDF5 file{where} ({exc})") from None
 
 
-def _check_header(f: h5py.File, path: Path) -> Params:
-    """Check the format attributes and datasets and return the stored parameters."""
-    if f.attrs.get("format") != FORMAT or "signatures" not in f:
+def _check_header(f: h5py.File, path: Path) -> tuple[Params, int]:
+    """Check the format attributes and return the stored parameters and the format version."""
+    if f.attrs.get("format") != FORMAT:
         raise IndexFileError(f"{path}: not a cfsig index")
     version = int(f.attrs.get("format_version", -1))
     if version > FORMAT_VERSION:
         raise IndexFileError(
             f"{path}: index format {version} is newer than this cfsig reads ({FORMAT_VERSION})"
         )
+    if version < 2 and "signatures" not in f:
+        raise IndexFileError(f"{path}: not a cfsig index")
     try:
-        return Params.from_json(f.attrs["params"])
+        return Params.from_json(f.attrs["params"]), version
     except (KeyError, TypeError, ValueError) as exc:
         raise IndexFileError(f"{path}: unreadable parameters ({exc})") from None
 

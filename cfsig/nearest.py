@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .blocks import Block, plan_blocks, read_block
-from .index import Entry, IndexReader
+from .index import Entry, IndexReader, SegmentView
 from .l1 import choose_kernel
 
 _BLOCK_ROWS = 16384  # rows per block of a dataset that is not chunked
@@ -65,8 +65,8 @@ def l1_distances(queries: np.ndarray, signatures: np.ndarray) -> np.ndarray:
 def nearest(reader: IndexReader, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """The k nearest indexed signatures of each query, streaming the index in blocks.
 
-    All queries share one pass over the file, made by one thread per core; memory stays bounded
-    by a few blocks of rows whatever the index size.
+    All queries share one pass over the segments, made by one thread per core; memory stays
+    bounded by a few blocks of rows whatever the index size. Superseded rows are skipped.
 
     Parameters
     ----------
@@ -86,33 +86,41 @@ def nearest(reader: IndexReader, queries: np.ndarray, k: int) -> tuple[np.ndarra
     """
     queries = _float32(np.atleast_2d(queries))
     n = len(reader)
-    best = _Best(len(queries), max(min(k, n), 0), n)
+    best = _Best(len(queries), max(min(k, n), 0), reader.physical_rows)
     if best.k == 0 or len(queries) == 0:
-        return best.result()
-    blocks = plan_blocks(reader.signatures, _BLOCK_ROWS)
+        return best.result(reader)
+    blocks = [
+        (view, b) for view in reader.segments for b in plan_blocks(view.signatures, _BLOCK_ROWS)
+    ]
     kernel = choose_kernel(len(queries) * n)
     todo = iter(blocks)
     lock = threading.Lock()
 
     def work() -> None:
-        block_rows = max(b.stop - b.start for b in blocks)
+        block_rows = max(b.stop - b.start for _, b in blocks)
         buffer = np.empty((block_rows, queries.shape[1]), np.float32)
         group = max(1, _OUT_CELLS // block_rows)
         out = np.empty(min(group, len(queries)) * block_rows, np.float32)
-        while (block := _next(todo, lock)) is not None:
-            rows = read_block(reader.signatures, block, buffer)
+        while (task := _next(todo, lock)) is not None:
+            view, block = task
+            rows = read_block(view.signatures, block, buffer)
+            dead = view.dead[(view.dead >= block.start) & (view.dead < block.stop)] - block.start
+            live = None
+            if len(dead):
+                live = np.ones(len(rows), bool)
+                live[dead] = False
             for q0 in range(0, len(queries), group):
                 count = len(queries[q0 : q0 + group])
                 dist = out[: count * len(rows)].reshape(count, len(rows))  # C-contiguous
                 kernel(queries[q0 : q0 + group], rows, dist)
                 with lock:
-                    best.merge(q0, block.start, dist)
+                    best.merge(q0, view.start + block.start, dist, live)
 
     threads = min(_threads(), len(blocks))
     with ThreadPoolExecutor(threads) as pool:
         for done in [pool.submit(work) for _ in range(threads)]:
             done.result()
-    return best.result()
+    return best.result(reader)
 
 
 def search(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[Hit]]:
@@ -148,10 +156,17 @@ class _Best:
         self.dist = np.full((n_queries, k), np.nan, np.float32)
         self.rows = np.full((n_queries, k), n_rows, np.int64)
 
-    def merge(self, first_query: int, first_row: int, dist: np.ndarray) -> None:
-        """Take in distances (q, m) from queries ``first_query...`` to rows ``first_row...``."""
+    def merge(
+        self, first_query: int, first_row: int, dist: np.ndarray, live: np.ndarray | None
+    ) -> None:
+        """Take in distances (q, m) from queries ``first_query...`` to rows ``first_row...``.
+
+        Rows where ``live`` (m,) is false, superseded ones, are left out.
+        """
         held = slice(first_query, first_query + len(dist))
         candidates = ~(dist > self.dist[held, -1:])  # also true for NaN
+        if live is not None:
+            candidates &= live
         for j in np.flatnonzero(candidates.any(axis=1)):
             new = np.flatnonzero(candidates[j])
             d = np.concatenate([self.dist[first_query + j], dist[j, new]])
@@ -159,13 +174,17 @@ class _Best:
             keep = np.lexsort((r, d))[: self.k]
             self.dist[first_query + j], self.rows[first_query + j] = d[keep], r[keep]
 
-    def result(self) -> tuple[np.ndarray, np.ndarray]:
-        """Rows and distances, nearest first."""
-        return self.rows.copy(), self.dist.astype(np.float64)
+    def result(self, reader: IndexReader) -> tuple[np.ndarray, np.ndarray]:
+        """Row numbers of the reader and distances, nearest first."""
+        return reader.logical_rows(self.rows.ravel()).reshape(self.rows.shape), self.dist.astype(
+            np.float64
+        )
 
 
-def _next(blocks: Iterator[Block], lock: threading.Lock) -> Block | None:
-    """The next block to scan, shared by the threads."""
+def _next(
+    blocks: Iterator[tuple[SegmentView, Block]], lock: threading.Lock
+) -> tuple[SegmentView, Block] | None:
+    """The next block to scan and its segment, shared by the threads."""
     with lock:
         return next(blocks, None)
 

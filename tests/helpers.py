@@ -133,3 +133,36 @@ def build_index(path: str | os.PathLike, n: int = 10, params: Params | None = No
             entry = Entry(f"c{i % 3}/{i}.off", f"c{i % 3}", f"/data/c{i % 3}/{i}.off")
             w.add(entry, random_signature(i))
     return [random_signature(i).vector for i in range(n)]
+
+
+def read_plain(index: str | os.PathLike) -> dict:
+    """Every live row of an index read with plain h5py, as docs/index-format.md says.
+
+    Returns the manifest's attributes under ``"attrs"`` and each dataset of the segments,
+    rows of superseded entries left out, in row order.
+    """
+    import h5py
+
+    index = Path(index)
+    with h5py.File(index / "manifest.h5", "r") as m:
+        attrs = dict(m.attrs)
+        files = list(m["segment_files"].asstr()[:])
+        ids = list(m["segment_ids"][:])
+    segments = [h5py.File(index / name, "r") for name in files]
+    try:
+        dropped = np.concatenate([np.zeros((0, 2), np.int64)] + [s["drops"][:] for s in segments])
+        out: dict = {"attrs": attrs}
+        for key in segments[0] if segments else []:
+            if segments[0][key].shape[:1] != segments[0]["names"].shape:
+                continue  # not a column of rows
+            parts = []
+            for seg_id, s in zip(ids, segments, strict=True):
+                live = np.ones(len(s["names"]), bool)
+                live[dropped[dropped[:, 0] == seg_id, 1]] = False
+                data = s[key].asstr()[:] if s[key].dtype.kind == "O" else s[key][:]
+                parts.append(data[live])
+            out[key] = np.concatenate(parts)
+        return out
+    finally:
+        for s in segments:
+            s.close()

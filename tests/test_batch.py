@@ -11,6 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 import cfsig
+import cfsig.index
 from cfsig import batch
 from cfsig.batch import compute_many, index_meshes
 from cfsig.cli import main
@@ -62,9 +63,9 @@ def test_index_meshes_adds_new_and_changed_files_only(meshes, tmp_path):
     index = tmp_path / "library.h5"
     seen = []
 
-    def progress(outcomes, total):
-        seen.append(total)
+    def progress(outcomes, total):  # the total grows as the folder is scanned
         yield from outcomes
+        seen.append(total())
 
     with IndexWriter(index, Params()) as writer:
         added, failures = index_meshes(writer, [meshes], jobs=2, progress=progress)
@@ -186,3 +187,34 @@ def test_jobs_and_scheduler_are_exclusive(meshes):
     result = CliRunner().invoke(main, ["index", str(meshes), "-o", str(meshes / "x.h5"),
                                        "-j", "2", "--scheduler", "tcp://127.0.0.1:9"])  # fmt: skip
     assert result.exit_code == 2 and "not both" in result.output
+
+
+def test_index_meshes_computes_while_the_folder_is_scanned(meshes, tmp_path, monkeypatch):
+    found, at_first_outcome, totals = [], [], []
+    real_find = batch.find_meshes
+
+    def slow_scan(paths):  # records how far the scan has gone
+        for item in real_find(paths):
+            found.append(item)
+            yield item
+
+    def progress(outcomes, total):
+        for outcome in outcomes:
+            at_first_outcome.append(len(found))
+            totals.append(total())
+            yield outcome
+
+    monkeypatch.setattr(batch, "find_meshes", slow_scan)
+    with IndexWriter(tmp_path / "i", Params()) as writer:
+        index_meshes(writer, [meshes], jobs=1, progress=progress)
+    assert at_first_outcome[0] < 6  # the first signature came before the scan ended
+    assert totals == sorted(totals) and totals[0] < totals[-1] == 6  # the total grew
+    (meshes / "round" / "new.off").write_bytes((meshes / "ring" / "d.off").read_bytes())
+    hashed = []
+    real_sha256 = cfsig.index.hashlib.sha256
+    monkeypatch.setattr(
+        cfsig.index.hashlib, "sha256", lambda data: hashed.append(data) or real_sha256(data)
+    )
+    with IndexWriter(tmp_path / "i", Params()) as writer:
+        added, _ = index_meshes(writer, [meshes], jobs=1)
+    assert added == 1 and len(hashed) == 5  # only the files whose names are indexed

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 
 from cfsig.cli import main
 from cfsig.demo import make_demo_collection
-from cfsig.index import Entry, IndexReader, IndexWriter
+from cfsig.index import FORMAT_VERSION, Entry, IndexReader, IndexWriter, check_index
 from cfsig.params import Params
 from tests.helpers import random_signature
 
@@ -90,9 +90,11 @@ def test_sigkill_mid_run_then_resume(meshes, tmp_path):
     assert f"{total - len(committed_before)} meshes added" in done.stdout  # no recomputation
     names = _rows(index)
     assert sorted(names) == sorted(p.relative_to(meshes).as_posix() for p in meshes.rglob("*.off"))
-    with h5py.File(index, "r") as f:
-        assert np.isfinite(f["signatures"][:]).all()
-    assert not list(tmp_path.glob(".*.tmp"))
+    with IndexReader(index) as reader:
+        assert np.isfinite(reader.signatures[:]).all()
+        listed = {Path(view.signatures.file.filename).name for view in reader.segments}
+    assert {p.name for p in index.iterdir()} == listed | {"manifest.h5"}  # nothing left over
+    assert check_index(index) == []
 
 
 def test_second_writer_gets_clear_error(meshes, tmp_path):
@@ -125,9 +127,10 @@ def test_unusable_index_one_line_error(meshes, tmp_path, kind, build_index):
     index = tmp_path / "i.h5"
     if kind == "corrupt":
         build_index(index, 3)
-        data = bytearray(index.read_bytes())
+        manifest = index / "manifest.h5"
+        data = bytearray(manifest.read_bytes())
         data[: len(data) // 2] = os.urandom(len(data) // 2)
-        index.write_bytes(bytes(data))
+        manifest.write_bytes(bytes(data))
     elif kind == "foreign":
         with h5py.File(index, "w") as f:
             f["data"] = np.arange(3)
@@ -135,8 +138,8 @@ def test_unusable_index_one_line_error(meshes, tmp_path, kind, build_index):
         # six entries: two per class, so that evaluate has something to retrieve
         build_index(index, 6, Params(seed=7) if kind == "params" else None)
         if kind == "newer":
-            with h5py.File(index, "a") as f:
-                f.attrs["format_version"] = 2
+            with h5py.File(index / "manifest.h5", "a") as f:
+                f.attrs["format_version"] = FORMAT_VERSION + 1
     mesh = next(meshes.rglob("*.off"))
     for args in (["query", str(index), str(mesh)], ["evaluate", "--index", str(index)]):
         result = CliRunner().invoke(main, args)

@@ -262,7 +262,7 @@ def computed(folder):
 
     def progress(outcomes, total):
         for outcome in outcomes:
-            seen.append((total, outcome.path.name))
+            seen.append((total(), outcome.path.name))
             yield outcome
 
     collection, failures = compute_collection(folder, Params(), jobs=1, progress=progress)

@@ -28,10 +28,14 @@ def test_update_replaces_by_name(tmp_path):
     with IndexWriter(path, Params()) as w:
         w.add(Entry("c1/1.off", "c1", "/x"), _sig(99))
         w.add(Entry("new.off", "z", "/y"), _sig(5))
-    with IndexReader(path) as r:
-        assert len(r) == 5
-        assert np.allclose(r.signatures[1], _sig(99).vector, atol=1e-7)
-        assert r.column("names")[4] == "new.off"
+    with IndexReader(path) as r:  # the new row of c1/1.off supersedes the old one
+        names = list(r.column("names"))
+        assert len(r) == 5 and sorted(names) == sorted(
+            ["new.off"] + [f"c{i % 3}/{i}.off" for i in range(4)]
+        )
+        assert np.allclose(r.signatures[names.index("c1/1.off")], _sig(99).vector, atol=1e-7)
+        assert np.allclose(r.signatures[names.index("c0/0.off")], _sig(0).vector, atol=1e-7)
+        assert r.entries([names.index("c1/1.off")])[0].path == "/x"
 
 
 def test_other_params_refused(tmp_path):
@@ -46,7 +50,9 @@ def test_second_writer_refused(tmp_path):
             IndexWriter(tmp_path / "i.h5", Params())
 
 
-@pytest.mark.parametrize("kind", ["missing", "garbage", "foreign", "newer"])
+@pytest.mark.parametrize(
+    "kind", ["missing", "garbage", "foreign", "newer", "empty folder", "garbage manifest"]
+)
 def test_bad_index_files(tmp_path, kind):
     path = tmp_path / "i.h5"
     if kind == "garbage":
@@ -56,16 +62,24 @@ def test_bad_index_files(tmp_path, kind):
             f["x"] = [1, 2, 3]
     elif kind == "newer":
         _build(path, 2)
-        with h5py.File(path, "a") as f:
+        with h5py.File(path / "manifest.h5", "a") as f:
             f.attrs["format_version"] = 99
+    elif kind == "empty folder":
+        path.mkdir()
+    elif kind == "garbage manifest":
+        _build(path, 2)
+        (path / "manifest.h5").write_bytes(b"not hdf5 at all" * 100)
     with pytest.raises(IndexFileError, match=str(path)):
         IndexReader(path)
+    if kind != "missing":
+        with pytest.raises(IndexFileError, match=str(path)):
+            IndexWriter(path, Params())
 
 
 def test_nearest_matches_brute_force(tmp_path, monkeypatch):
-    import cfsig.index
+    import cfsig.segments
 
-    monkeypatch.setattr(cfsig.index, "_CHUNK_ROWS", 7)  # several blocks
+    monkeypatch.setattr(cfsig.segments, "_CHUNK_ROWS", 7)  # several blocks
     hists = np.array(_build(tmp_path / "i.h5", 30))
     queries = np.array([_sig(100).vector, _sig(101).vector])
     with IndexReader(tmp_path / "i.h5") as r:

@@ -4,9 +4,9 @@ import h5py
 import numpy as np
 import pytest
 
-import cfsig.index
 import cfsig.l1
 import cfsig.nearest
+import cfsig.segments
 from cfsig.blocks import plan_blocks, read_block
 from cfsig.errors import IndexFileError
 from cfsig.index import Entry, IndexReader, IndexWriter
@@ -37,7 +37,7 @@ def _brute_nearest(queries, rows, k):
 
 
 def _build(path, hists, chunk_rows, monkeypatch):
-    monkeypatch.setattr(cfsig.index, "_CHUNK_ROWS", chunk_rows)
+    monkeypatch.setattr(cfsig.segments, "_CHUNK_ROWS", chunk_rows)
     phi = np.zeros(1)
     with IndexWriter(path, Params()) as w:
         for i, h in enumerate(hists):
@@ -125,9 +125,15 @@ def test_many_queries_in_small_groups(tmp_path, monkeypatch, kernel):
     assert np.allclose(dist, want_dist, rtol=0, atol=2e-6)
 
 
-def _relayout(path, **create):
-    """Rewrite the signatures dataset of an index with another HDF5 layout."""
-    with h5py.File(path, "a") as f:
+def _segment(index):
+    """The one segment file of a small index."""
+    (path,) = index.glob("seg-*.h5")
+    return path
+
+
+def _relayout(index, **create):
+    """Rewrite the signatures dataset of an index's one segment with another HDF5 layout."""
+    with h5py.File(_segment(index), "a") as f:
         data = f["signatures"][:]
         del f["signatures"]
         f.create_dataset("signatures", data=data, **create)
@@ -152,9 +158,10 @@ def test_every_layout_gives_the_same_result(tmp_path, monkeypatch, layout):
         _relayout(path, **LAYOUTS[layout])
     monkeypatch.setattr(cfsig.nearest, "_BLOCK_ROWS", 10)
     with IndexReader(path) as r:
-        blocks = plan_blocks(r.signatures, 10)
+        data = r.segments[0].signatures
+        blocks = plan_blocks(data, 10)
         buffer = np.empty((max(b.stop - b.start for b in blocks), 200), np.float32)
-        parts = [read_block(r.signatures, b, buffer).copy() for b in blocks]
+        parts = [read_block(data, b, buffer).copy() for b in blocks]
         rows, _ = nearest(r, hists[:2], 6)
     direct = [b.offset is not None for b in blocks]  # read from the file, not through HDF5
     assert all(direct) if layout in ("chunked", "contiguous") else not any(direct)
@@ -194,8 +201,8 @@ def test_a_file_cut_short_after_opening_is_a_clear_error(tmp_path, monkeypatch):
     path = tmp_path / "i.h5"
     _build(path, _histograms(40, 12), 8, monkeypatch)
     with IndexReader(path) as r:
-        blocks = plan_blocks(r.signatures, 8)
-        os.truncate(path, blocks[-1].offset + 10)
+        blocks = plan_blocks(r.segments[0].signatures, 8)
+        os.truncate(_segment(path), blocks[-1].offset + 10)
         with pytest.raises(IndexFileError, match="ends inside the signatures"):
             nearest(r, _histograms(1, 4), 5)
 

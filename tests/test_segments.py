@@ -1,0 +1,241 @@
+"""Format 2: segments and merges, superseded rows, checksums and `cfsig check`, kills during a
+commit and a compaction, format-1 files read and converted."""
+
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import h5py
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import cfsig.index
+from cfsig.cli import main
+from cfsig.errors import IndexFileError
+from cfsig.index import Entry, IndexReader, IndexWriter, check_index, convert_index
+from cfsig.nearest import l1_distances, nearest
+from cfsig.params import Params
+from tests.helpers import random_signature
+
+
+def _add(writer, names, seed=0):
+    """Add random signatures under some names; return them by name."""
+    sigs = {name: random_signature(seed + i) for i, name in enumerate(names)}
+    for name, sig in sigs.items():
+        writer.add(Entry(name, name.split("/")[0], f"/d/{name}"), sig)
+    return {name: sig.vector for name, sig in sigs.items()}
+
+
+def _contents(index):
+    """Name -> stored signature of every entry, checking that each name is there once."""
+    with IndexReader(index) as r:
+        names = list(r.column("names"))
+        assert len(names) == len(set(names)) == len(r)
+        return dict(zip(names, r.signatures[:], strict=True))
+
+
+def test_commits_append_segments_merge_and_supersede(tmp_path, monkeypatch):
+    monkeypatch.setattr(cfsig.index, "MERGE_FANOUT", 3)
+    index, want = tmp_path / "i", {}
+    with IndexWriter(index, Params()) as w:
+        for c in range(10):  # one segment per commit, merged three at a time
+            want.update(_add(w, [f"c{c % 3}/{c}-{i}.off" for i in range(4)], seed=100 * c))
+            if c % 4 == 3:  # names of older segments again: their new rows supersede the old
+                want.update(_add(w, ["c0/0-1.off", f"c{(c - 1) % 3}/{c - 1}-2.off"], seed=999 + c))
+            w.commit()
+            assert len(w) == len(want)
+        assert 1 < len(w.segments) < 10
+        w.merge = False  # so that the rows this commit supersedes stay stored
+        want.update(_add(w, ["c1/1-0.off", "c2/8-3.off"], seed=5000))
+    got = _contents(index)
+    assert got.keys() == want.keys()
+    assert all(np.allclose(got[n], want[n], atol=1e-7) for n in want)
+    names, rows = list(got), np.array(list(got.values()))
+    queries = rows[[0, 5, 17]] + 0.001
+    with IndexReader(index) as r:
+        assert any(len(view.dead) for view in r.segments)  # superseded rows are still stored
+        found, dist = nearest(r, queries, 7)
+        hits = [[e.name for e in r.entries(row)] for row in found]
+    brute = l1_distances(queries, rows)
+    assert [[names[i] for i in np.argsort(b, kind="stable")[:7]] for b in brute] == hits
+    assert np.allclose(dist, np.sort(brute, axis=1)[:, :7], atol=1e-5)
+    with IndexReader(index) as before, IndexWriter(index, Params()) as w:
+        w.compact()
+        assert len(w.segments) == 1 and w.segments[0].rows == len(want)
+        assert np.array_equal(nearest(before, queries, 7)[0], found)  # still the old files
+    assert _contents(index).keys() == want.keys()
+    with IndexReader(index) as r:
+        assert [[e.name for e in r.entries(row)] for row in nearest(r, queries, 7)[0]] == hits
+    assert check_index(index) == []
+
+
+def _flip(path, offset):
+    data = bytearray(path.read_bytes())
+    data[offset] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("part", ["signatures", "n_faces", "names", "manifest"])
+def test_check_names_what_is_damaged(tmp_path, part, build_index):
+    index = tmp_path / "i"
+    build_index(index, 30)
+    (segment,) = index.glob("seg-*.h5")
+    assert check_index(index) == []
+    ok = CliRunner().invoke(main, ["check", str(index)])
+    assert ok.exit_code == 0 and "healthy (30 entries in 1 segment(s))" in ok.output
+    if part == "manifest":
+        with h5py.File(index / "manifest.h5", "r") as f:
+            offset = f["segment_rows"].id.get_offset()
+        _flip(index / "manifest.h5", offset)
+        with pytest.raises(IndexFileError, match="manifest is damaged"):
+            check_index(index)
+        with pytest.raises(IndexFileError, match="manifest is damaged"):
+            IndexReader(index)
+        return
+    with h5py.File(segment, "r") as f:
+        data = f[part]
+        if part == "signatures":
+            offset = data.id.get_chunk_info(0).byte_offset + 4 * 200 * 3 + 1  # row 3
+        elif part == "names":  # the strings themselves, in the global heap
+            offset = segment.read_bytes().index(b"c1/13.off")
+        else:
+            offset = data.id.get_offset() + 8 * 7 + 2
+    _flip(segment, offset)
+    problems = check_index(index)
+    assert problems and all(line.startswith(str(segment)) for line in problems)
+    want = "signatures rows 0-29" if part == "signatures" else f"column {part}"
+    assert any(f"{want}: checksum mismatch" in line for line in problems), problems
+    bad = CliRunner().invoke(main, ["check", str(index)])
+    assert bad.exit_code == 1 and want in bad.output and "Traceback" not in bad.output
+    with IndexWriter(index, Params()) as w:
+        _add(w, ["new/x.off"])
+        with pytest.raises(IndexFileError, match="checksum mismatch"):
+            w.compact()  # a merge does not copy damage into a new segment
+    assert check_index(index) == problems  # and leaves the index as it was
+
+
+_WRITE = textwrap.dedent(
+    """
+    import sys
+    from cfsig.index import Entry, IndexWriter
+    from cfsig.params import Params
+    from tests.helpers import random_signature
+    index, what = sys.argv[1], sys.argv[2]
+    with IndexWriter(index, Params(bins=16), merge=False) as w:
+        if what == "compact":
+            w.compact()
+        else:
+            sig = random_signature(0, 16)
+            for i in range(int(what)):
+                w.add(Entry(f"m/{i}.off", "m", f"/m/{i}.off"), sig)
+                if w.pending == 4000:
+                    w.commit()
+    """
+)
+
+
+def _writer(index, what):
+    return subprocess.Popen([sys.executable, "-c", _WRITE, str(index), str(what)])
+
+
+def _wait_for(condition, timeout=60):
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.005)
+
+
+def _rows_now(index):
+    try:
+        with IndexReader(index) as r:
+            return len(r)
+    except IndexFileError:  # not created yet
+        return 0
+
+
+def _merging(index):
+    """Whether a writer is writing a segment that the manifest does not list yet."""
+    next_id = cfsig.index.read_manifest(index).next_id
+    return any(int(p.stem.split("-")[1]) >= next_id for p in index.glob("seg-*.h5"))
+
+
+def test_sigkill_during_commits_and_compaction_loses_nothing(tmp_path):
+    index, total = tmp_path / "i", 40_000
+    everything = {f"m/{i}.off" for i in range(total)}
+    for delay in (0.0, 0.01, 0.03):  # a commit of 4,000 rows takes about 30 ms
+        before = set(_contents(index)) if index.exists() else set()
+        had = len(before)
+        proc = _writer(index, total)
+        _wait_for(lambda had=had: _rows_now(index) > had)  # this run has committed some
+        time.sleep(delay)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        assert before <= set(_contents(index))  # nothing committed is lost
+        assert check_index(index) == []
+    assert len(_contents(index)) < total, "a run finished before it was killed"
+    assert _writer(index, total).wait() == 0  # the re-run completes it
+    assert set(_contents(index)) == everything
+    with IndexReader(index) as r:
+        assert len(r.segments) > 2
+    for delay in (0.0, 0.1):  # the merge takes about 0.5 s
+        proc = _writer(index, "compact")
+        _wait_for(lambda: _merging(index))
+        time.sleep(delay)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        assert _merging(index)  # killed while writing the merged segment
+        assert set(_contents(index)) == everything
+        assert check_index(index) == []
+    assert _writer(index, "compact").wait() == 0
+    with IndexReader(index) as r:
+        assert len(r.segments) == 1
+    assert set(_contents(index)) == everything
+    assert {p.name for p in index.iterdir()} == {"manifest.h5", f"seg-{_last(index):08d}.h5"}
+
+
+def _last(index):
+    return cfsig.index.read_manifest(index).segments[-1].id
+
+
+def _format_1(path, n):
+    """A format-1 index file as cfsig wrote them before format 2."""
+    sigs = np.array([random_signature(i).vector for i in range(n)], np.float32)
+    with h5py.File(path, "w") as f:
+        f.attrs.update(format="cfsig-index", format_version=1, params=Params().to_json())
+        f.create_dataset("signatures", data=sigs, maxshape=(None, 200), chunks=(4096, 200))
+        text = h5py.string_dtype("utf-8")
+        f.create_dataset("names", data=[f"c/{i}.off" for i in range(n)], dtype=text)
+        f.create_dataset("labels", data=["c"] * n, dtype=text)
+        f.create_dataset("paths", data=[f"/c/{i}.off" for i in range(n)], dtype=text)
+        f.create_dataset("sha256", data=np.array([b"0" * 64] * n, "S64"))
+        for key in ("n_vertices", "n_faces", "n_components"):
+            f.create_dataset(key, data=np.ones(n, np.int64))
+        for key in ("phi_min", "phi_max", "curvature_error"):
+            f.create_dataset(key, data=np.zeros(n))
+    return sigs
+
+
+def test_format_1_is_read_and_converted(tmp_path):
+    old, new = tmp_path / "old.h5", tmp_path / "new"
+    sigs = _format_1(old, 12)
+    with IndexReader(old) as r:
+        assert len(r) == 12 and r.entries([3])[0] == Entry("c/3.off", "c", "/c/3.off")
+        rows, _ = nearest(r, sigs[[5]], 3)
+    assert rows[0, 0] == 5
+    with pytest.raises(IndexFileError, match="cfsig convert"):
+        IndexWriter(old, Params())
+    result = CliRunner().invoke(main, ["index", str(tmp_path), "-o", str(old)])
+    assert result.exit_code == 1 and "convert it with" in result.output
+    with pytest.raises(IndexFileError, match="format-1 index has no checksums"):
+        check_index(old)
+    result = CliRunner().invoke(main, ["convert", str(old), str(new)])
+    assert result.exit_code == 0 and "12 entries converted" in result.output, result.output
+    assert check_index(new) == []
+    with IndexReader(new) as r:
+        assert np.array_equal(r.signatures[:], sigs) and list(r.column("names"))[3] == "c/3.off"
+        assert np.array_equal(nearest(r, sigs[[5]], 3)[0], rows)
+    with pytest.raises(IndexFileError, match="already exists"):
+        convert_index(old, new)
