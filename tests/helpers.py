@@ -123,7 +123,10 @@ def write_off(path: str | os.PathLike, vertices: np.ndarray, faces) -> Path:
 def random_signature(seed: int, bins: int = 200) -> Signature:
     """A signature of random values summing to 1, with a hash made of the seed."""
     h = np.random.default_rng(seed).random(bins)
-    return Signature(h / h.sum(), np.zeros(3), 3, 1, 1, 0.0, (), 0.0, f"{seed:064d}")
+    return Signature(
+        vector=h / h.sum(), phi=np.zeros(3), n_vertices=3, n_faces=1, n_components=1,
+        curvature_error=0.0, repairs=(), route="clean", seconds=0.0, sha256=f"{seed:064d}",
+    )  # fmt: skip
 
 
 def build_index(path: str | os.PathLike, n: int = 10, params: Params | None = None) -> list:
