@@ -73,9 +73,13 @@ DESCRIPTORS = {
     "cf": Params(),
     "cfhks 1": Params(descriptor="cfhks", version=1),
     "cfhks 2": Params(descriptor="cfhks", version=2),
+    "cfhks 3": Params(descriptor="cfhks", version=3),
 }
 NAMES = (*DESCRIPTORS, "ShapeDNA")
 V2 = cfhks.DESIGNS[2]
+# The curvature scales measured for version 3's study: quadrupling from version 3's smallest,
+# at half steps (2 ** j * 0.0000625, j = -2 .. 11).
+LADDER = tuple(0.0000625 * 2.0**j for j in range(-2, 12))
 # The grid of `study`: heat times as slices of version 2's eight, and channel weights.
 TIME_SETS = {"all 8": slice(0, 8), "version 1's 4": slice(1, 5), "middle 4": slice(2, 6),
              "first 4": slice(0, 4), "last 4": slice(4, 8)}  # fmt: skip
@@ -112,7 +116,7 @@ def _measure_one(path: Path) -> dict:
     row["ShapeDNA"] = shapedna(path)
     row["ShapeDNA s"] = time.process_time() - start
     cf = conformal_factor(repair_mesh(read_mesh(path)), Params().mollify)
-    row.update(cfhks.channels(cf, V2.times))
+    row.update(cfhks.channels(cf, V2.times, LADDER))
     return row
 
 
@@ -249,6 +253,85 @@ def study(args: argparse.Namespace) -> None:
         print(f"- {channel}: median distance averaged over {', '.join(CHOSEN_ON)} {divisor:.4f}")
 
 
+CURVATURE_WEIGHTS = (0.5, 1.0, 2.0)
+V3_CHOSEN_ON = ("shrec07", "faust")
+
+
+def _ladders() -> list[tuple[int, ...]]:
+    """Version 3's candidate scale sets: 1 to 4 quadrupling scales of LADDER, as indices."""
+    return [
+        tuple(range(start, start + 2 * count, 2))
+        for count in (1, 2, 3, 4)
+        for start in range(len(LADDER) - 2 * (count - 1))
+    ]
+
+
+class Curvature:
+    """Version 2's distance plus a weighted curvature channel, per collection."""
+
+    def __init__(self, data: dict[str, dict[str, np.ndarray]]) -> None:
+        self.data = data
+        self.v2 = {c: _distances("cfhks 2", data[c]["cfhks 2"]) for c in data}
+        self.scale = {
+            c: [_pairwise(data[c]["curvature"][:, j]) for j in range(len(LADDER))] for c in data
+        }
+
+    def ladder(self, collection: str, scales: tuple[int, ...]) -> np.ndarray:
+        """The curvature distance of some scales: the mean of their histograms' distances."""
+        return sum(self.scale[collection][j] for j in scales) / len(scales)
+
+    def medians(self, scales: tuple[int, ...], train: tuple[str, ...]) -> tuple[float, float]:
+        """Version 2's and the curvature's median distances, averaged over ``train``."""
+        v2 = np.mean([_median(self.v2[t]) for t in train])
+        return float(v2), float(np.mean([_median(self.ladder(t, scales)) for t in train]))
+
+    def first_tier(self, scales: tuple[int, ...], weight: float, train: tuple[str, ...]):
+        """FT of every collection with these scales and weight, divisors from ``train``."""
+        v2, curvature = self.medians(scales, train)
+        return {
+            c: _report(
+                self.v2[c] / v2 + weight * self.ladder(c, scales) / curvature,
+                self.data[c]["labels"],
+            ).measures["FT"]
+            for c in self.data
+        }
+
+    def choose(self, train: tuple[str, ...]) -> tuple[tuple[int, ...], float, dict[str, float]]:
+        """The scales and weight with the best mean FT over ``train``, and every FT."""
+        scored = [
+            (scales, weight, self.first_tier(scales, weight, train))
+            for scales in _ladders()
+            for weight in CURVATURE_WEIGHTS
+        ]
+        return max(scored, key=lambda item: np.mean([item[2][c] for c in train]))
+
+
+def _scales_text(scales: tuple[int, ...]) -> str:
+    """Scale indices of LADDER in words."""
+    return ", ".join(f"{LADDER[j]:.3g}" for j in scales)
+
+
+def study3(args: argparse.Namespace) -> None:
+    """Leave-one-collection-out choice of version 3's curvature channel, then the choice."""
+    curvature = Curvature(_load(args.cache))
+    print("Version 2 plus curvature at scales; chosen on the other two, FT on each.\n")
+    print("| left out | scales | weight | " + " | ".join(COLLECTIONS) + " |")
+    print("|---|---|---|" + "---|" * 3)
+    for left_out in COLLECTIONS:
+        train = tuple(c for c in COLLECTIONS if c != left_out)
+        scales, weight, ft = curvature.choose(train)
+        cells = [f"**{ft[c]:.3f}**" if c == left_out else f"{ft[c]:.3f}" for c in COLLECTIONS]
+        print(f"| {left_out} | {_scales_text(scales)} | {weight:g} | " + " | ".join(cells) + " |")
+    scales, weight, ft = curvature.choose(V3_CHOSEN_ON)
+    v2, median = curvature.medians(scales, V3_CHOSEN_ON)
+    # weigh() divides each of the len(scales) * CURVATURE_BINS entries by CURVATURE_BINS * d,
+    # version 2's vector has V2.length entries and _pairwise averages over entries.
+    divisor = len(scales) * median / (weight * V2.length * v2)
+    print(f"\nChosen on {' and '.join(V3_CHOSEN_ON)} (version 3): scales {_scales_text(scales)}")
+    print(f"(times the area), weight {weight:g}; curvature divisor {divisor:.6f}")
+    print("FT: " + ", ".join(f"{c} {ft[c]:.3f}" for c in COLLECTIONS))
+
+
 def _distances(name: str, vectors: np.ndarray) -> np.ndarray:
     """A descriptor's all-pairs distance: L2 for ShapeDNA, L1 (the index's) otherwise."""
     return _pairwise(vectors, order=2 if name == "ShapeDNA" else 1)
@@ -380,6 +463,7 @@ def main() -> None:
     stages = {
         "measure": measure,
         "study": study,
+        "study3": study3,
         "compare": compare,
         "cost": cost,
         "coarse": coarse,

@@ -29,6 +29,10 @@ _EXPORTS = {
     "compute_many": "batch",
     "Hit": "nearest",
     "search": "nearest",
+    "partial_file": "parts",
+    "partial_search": "parts",
+    "evaluate_partial": "evaluate",
+    "evaluate_queries": "measures",
     "Collection": "evaluate",
     "compute_collection": "evaluate",
     "collection_from_index": "evaluate",
@@ -55,8 +59,12 @@ __all__ = [
     "compute_signature",
     "evaluate_collections",
     "evaluate_distances",
+    "evaluate_partial",
+    "evaluate_queries",
     "index_meshes",
     "read_cla",
+    "partial_file",
+    "partial_search",
     "read_mesh",
     "search",
     "signature_file",
@@ -71,12 +79,14 @@ if TYPE_CHECKING:
         collection_from_index,
         compute_collection,
         evaluate_collections,
+        evaluate_partial,
     )
     from .index import Entry, IndexReader, IndexWriter
-    from .measures import RetrievalReport, evaluate_distances
+    from .measures import RetrievalReport, evaluate_distances, evaluate_queries
     from .mesh import read_mesh
     from .nearest import Hit, search
     from .params import Params
+    from .parts import partial_file, partial_search
     from .signature import Signature, compute_signature, signature_file
 
     __version__: str

@@ -1,6 +1,6 @@
-"""The ``cfhks`` descriptor: phi, the low Laplace-Beltrami spectrum and heat kernel signatures.
+"""The ``cfhks`` descriptor: phi, the spectrum, heat kernel signatures and curvature at scales.
 
-Up to three channels, all invariant to rigid motion and scale and all (nearly) invariant to
+Up to four channels, all invariant to rigid motion and scale and all (nearly) invariant to
 isometric bending, computed from the one factorisation that the conformal factor's solve makes
 (see docs/descriptors.md for what each captures and how every constant here was chosen):
 
@@ -13,6 +13,10 @@ isometric bending, computed from the one factorisation that the conformal factor
 - ``heat``: for each diffusion time ``t = tau * area`` of the version's ``times``, the
   distribution of ``log(area * h_t(x))`` over the surface, h the heat kernel signature;
   1-Wasserstein distance per time.
+- ``curvature``: for each scale ``s`` of the version's ``scales``, the area-weighted histogram
+  of the angle defect smoothed by heat diffusion for ``s * area`` (`cfsig.curvature`), on
+  ``asinh(value / 10)`` in ``CURVATURE_BINS`` bins; L1 distance per scale. It needs no
+  eigenproblem, only one factorisation per scale.
 
 The distance between two meshes is the sum over channels of the channel's distance divided by
 a constant of the version (`Design`): a median of that distance over the pairs of unlabelled
@@ -26,19 +30,25 @@ Versions (`Params.version`; an index stores its own, and a query recomputes with
 2. Eight times (0.0025 to 0.32, doubling), weights 0 (phi: left out of the vector), 1
    (spectrum) and 3 (heat, its distance averaged over the times), chosen on SHREC 2007 and
    McGill together, with the medians averaged over those two collections.
+3. Version 2 plus curvature at three scales (0.0000625 to 0.001, quadrupling), weighed like
+   all of version 2 together, chosen on SHREC 2007 and FAUST (McGill held out).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .conformal import ConformalFactor
+from .curvature import smoothed_curvature
 from .spectrum import heat_kernel_signature, laplace_spectrum
 
 QUANTILES = 64
 EIGENPAIRS = 30
+CURVATURE_BINS = 48
+CURVATURE_RANGE = 6.0  # bins span asinh(value / CURVATURE_UNIT) in [-6, 6]: +-2000 in value
+CURVATURE_UNIT = 10.0  # about the sphere's 4 pi: the histogram is linear below, logarithmic above
 
 
 @dataclass(frozen=True)
@@ -55,17 +65,29 @@ class Design:
         Divisor of the spectrum distance.
     heat : tuple of float
         Divisor of each time's heat distance, one per time.
+    scales : tuple of float
+        Diffusion times of the curvature channel divided by the surface area; empty leaves the
+        channel out.
+    curvature : float
+        Divisor of each scale's curvature distance.
     """
 
     times: tuple[float, ...]
     phi: float | None
     spectrum: float
     heat: tuple[float, ...]
+    scales: tuple[float, ...] = ()
+    curvature: float = 1.0
 
     @property
     def length(self) -> int:
         """Length of the descriptor vector."""
-        return (self.phi is not None) * QUANTILES + EIGENPAIRS + QUANTILES * len(self.times)
+        return (
+            (self.phi is not None) * QUANTILES
+            + EIGENPAIRS
+            + QUANTILES * len(self.times)
+            + CURVATURE_BINS * len(self.scales)
+        )
 
 
 _V1_HEAT = (0.1176, 0.1588, 0.2298, 0.2984)  # per time, then their sum's median, 4.038
@@ -73,9 +95,13 @@ _V2_TIMES = tuple(0.0025 * 2.0**j for j in range(8))
 # The medians are printed by `python benchmarks/descriptors.py study` (docs/descriptors.md):
 # version 1 over SHREC 2007's pairs; version 2 the mean of SHREC 2007's and McGill's, each
 # divided by its channel's weight (heat 3, its time average taken by the divisor).
+_V2 = Design(_V2_TIMES, None, 0.3173, (len(_V2_TIMES) * 0.2152 / 3,) * len(_V2_TIMES))
+# Version 3's curvature divisor: the median curvature distance over SHREC 2007's and FAUST's
+# pairs, relative to the median of version 2's distance there (weight 1, docs/descriptors.md).
 DESIGNS = {
     1: Design((0.005, 0.01, 0.02, 0.04), 1.834, 0.2815, tuple(s * 4.038 for s in _V1_HEAT)),
-    2: Design(_V2_TIMES, None, 0.3173, (len(_V2_TIMES) * 0.2152 / 3,) * len(_V2_TIMES)),
+    2: _V2,
+    3: replace(_V2, scales=(0.0000625, 0.00025, 0.001), curvature=0.011336),
 }
 
 
@@ -103,7 +129,33 @@ def weighted_quantiles(values: np.ndarray, weights: np.ndarray, count: int) -> n
     return values[order][picked]
 
 
-def channels(cf: ConformalFactor, times: tuple[float, ...]) -> dict[str, np.ndarray]:
+def curvature_histograms(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Histograms of curvature at scales, the ``curvature`` channel.
+
+    Parameters
+    ----------
+    values : (n, k) float64
+        `cfsig.curvature.smoothed_curvature` at k scales, dimensionless.
+    weights : (n,) float64
+        Non-negative vertex weights (areas) with a positive sum.
+
+    Returns
+    -------
+    histograms : (k, CURVATURE_BINS) float64
+        Per scale, the fraction of the weight in each bin of ``asinh(value / CURVATURE_UNIT)``
+        on [-CURVATURE_RANGE, CURVATURE_RANGE], values beyond counted in the end bins.
+    """
+    position = np.arcsinh(values / CURVATURE_UNIT) + CURVATURE_RANGE
+    position *= CURVATURE_BINS / (2 * CURVATURE_RANGE)
+    bins = np.clip(position, 0, CURVATURE_BINS - 1).astype(np.intp)
+    fractions = weights / weights.sum()
+    counts = [np.bincount(b, weights=fractions, minlength=CURVATURE_BINS) for b in bins.T]
+    return np.array(counts).reshape(values.shape[1], CURVATURE_BINS)
+
+
+def channels(
+    cf: ConformalFactor, times: tuple[float, ...], scales: tuple[float, ...] = ()
+) -> dict[str, np.ndarray]:
     """The unweighted channels of a mesh whose conformal factor is known.
 
     Parameters
@@ -112,6 +164,8 @@ def channels(cf: ConformalFactor, times: tuple[float, ...]) -> dict[str, np.ndar
         Result of `conformal.conformal_factor`, whose factorisation is reused.
     times : tuple of float
         Diffusion times of the heat channel divided by the surface area (`Design.times`).
+    scales : tuple of float
+        Scales of the curvature channel (`Design.scales`).
 
     Returns
     -------
@@ -119,17 +173,17 @@ def channels(cf: ConformalFactor, times: tuple[float, ...]) -> dict[str, np.ndar
         ``"phi"``: (QUANTILES,) quantiles of phi, dimensionless. ``"spectrum"``: (EIGENPAIRS,)
         ``log(lambda_i * area)``; a mesh with fewer nonzero eigenvalues repeats its largest.
         ``"heat"``: (len(times), QUANTILES) quantiles of ``log(area * h_t)``.
+        ``"curvature"``: (len(scales), CURVATURE_BINS) `curvature_histograms`.
 
     Raises
     ------
     SolverError
-        The eigenvalue iteration failed.
+        The eigenvalue iteration or a curvature diffusion failed.
     """
-    spectrum = laplace_spectrum(
-        cf.operators.laplacian, cf.operators.vertex_area, cf.operators.labels, cf.solve, EIGENPAIRS
-    )
+    ops = cf.operators
+    spectrum = laplace_spectrum(ops.laplacian, ops.vertex_area, ops.labels, cf.solve, EIGENPAIRS)
     area = spectrum.area
-    weights = cf.operators.vertex_area / area
+    weights = ops.vertex_area / area
     scaled = np.log(spectrum.eigenvalues * area)
     scaled = np.concatenate([scaled, np.full(EIGENPAIRS - len(scaled), scaled[-1])])
     hks = heat_kernel_signature(spectrum, np.asarray(times) * area)
@@ -138,6 +192,7 @@ def channels(cf: ConformalFactor, times: tuple[float, ...]) -> dict[str, np.ndar
         "phi": weighted_quantiles(cf.phi, weights, QUANTILES),
         "spectrum": scaled,
         "heat": heat,
+        "curvature": curvature_histograms(smoothed_curvature(ops, scales), weights),
     }
 
 
@@ -147,7 +202,7 @@ def weigh(parts: dict[str, np.ndarray], design: Design) -> np.ndarray:
     Parameters
     ----------
     parts : dict
-        What `channels` returns for ``design.times``.
+        What `channels` returns for ``design.times`` and ``design.scales``.
     design : Design
         The version's divisors.
 
@@ -155,7 +210,8 @@ def weigh(parts: dict[str, np.ndarray], design: Design) -> np.ndarray:
     -------
     vector : (design.length,) float64
         ``phi`` quantiles (unless ``design.phi`` is None), then the log spectrum, then the heat
-        quantiles time by time, each entry divided by its channel's length and divisor.
+        quantiles time by time, then the curvature histograms scale by scale, each entry
+        divided by its channel's length and divisor.
     """
     phi = [] if design.phi is None else [parts["phi"] / (QUANTILES * design.phi)]
     return np.concatenate(
@@ -163,8 +219,27 @@ def weigh(parts: dict[str, np.ndarray], design: Design) -> np.ndarray:
             *phi,
             parts["spectrum"] / (EIGENPAIRS * design.spectrum),
             (parts["heat"] / (QUANTILES * np.asarray(design.heat)[:, None])).ravel(),
+            weigh_curvature(parts["curvature"], design),
         ]
     )
+
+
+def weigh_curvature(histograms: np.ndarray, design: Design) -> np.ndarray:
+    """The curvature channel's part of the descriptor vector.
+
+    Parameters
+    ----------
+    histograms : (len(design.scales), CURVATURE_BINS) float64
+        `curvature_histograms`.
+    design : Design
+        The version's divisors.
+
+    Returns
+    -------
+    entries : (len(design.scales) * CURVATURE_BINS,) float64
+        Each histogram entry divided by ``CURVATURE_BINS * design.curvature``, scale by scale.
+    """
+    return (histograms / (CURVATURE_BINS * design.curvature)).ravel()
 
 
 def cfhks_vector(cf: ConformalFactor, version: int) -> np.ndarray:
@@ -188,4 +263,4 @@ def cfhks_vector(cf: ConformalFactor, version: int) -> np.ndarray:
         The eigenvalue iteration failed.
     """
     design = DESIGNS[version]
-    return weigh(channels(cf, design.times), design)
+    return weigh(channels(cf, design.times, design.scales), design)

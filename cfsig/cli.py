@@ -356,28 +356,43 @@ def _format_routes(routes: Counter[str]) -> str:
     type=_FILE,
     help="Draw each query and its results as framed thumbnails.",
 )
-def query(index_file, meshes, k, solver, as_json, png) -> None:
+@click.option(
+    "--partial",
+    is_flag=True,
+    help="Each query is a part of a shape (a cut, a scan, holes): find the wholes it belongs to.",
+)
+def query(index_file, meshes, k, solver, as_json, png, partial) -> None:
     """Find the k indexed meshes nearest to each query mesh (L1 distance).
 
-    The query signatures are computed with the index's own parameters. In the --png picture
-    a query whose folder name is a class of the index has its results framed green (same
-    class) or orange (another class).
+    The query signatures are computed with the index's own parameters. With --partial the
+    first result is the whole whose curvature at small scales matches the part's best, the
+    others the meshes nearest to that whole, with their distances to it (docs/method.md);
+    it needs an index of cfhks version 3 or later. In the --png picture a query whose folder
+    name is a class of the index has its results framed green (same class) or orange.
 
     \b
     Example:
       cfsig query shrec07.h5 shrec07/ant/81.off -k 10
       cfsig query shrec07.h5 shrec07/ant/81.off --png ant.png
+      cfsig query shrec07.h5 scan.ply --partial
     """
     import numpy as np
 
     from .index import IndexReader
     from .nearest import search
+    from .parts import partial_file, partial_search
     from .signature import signature_file
 
     try:
         with IndexReader(index_file) as reader:
-            sigs = [signature_file(path, reader.params, solver).vector for path in meshes]
-            results = search(reader, np.array(sigs), k)
+            if partial:
+                results = [
+                    partial_search(reader, partial_file(path, reader.params), k)[0]
+                    for path in meshes
+                ]
+            else:
+                sigs = [signature_file(path, reader.params, solver).vector for path in meshes]
+                results = search(reader, np.array(sigs), k)
             classes = set(reader.column("labels")) if png else set()
     except CfsigError as exc:
         _fail(str(exc))
@@ -439,6 +454,13 @@ def query(index_file, meshes, k, solver, as_json, png) -> None:
     type=_FOLDER,
     help="Write DIR/index.html: measures, curves and one query per class.",
 )
+@click.option(
+    "--partial",
+    "parts",
+    type=_FOLDER,
+    help="With --index: evaluate the parts in this folder (one subfolder per class) as "
+    "partial queries against the index's whole shapes.",
+)
 def evaluate(
     folder,
     classes,
@@ -454,6 +476,7 @@ def evaluate(
     as_json,
     plot,
     report_dir,
+    parts,
 ) -> None:
     """Retrieval measures of a labelled collection (leave-one-out).
 
@@ -469,9 +492,15 @@ def evaluate(
       cfsig evaluate shrec07/ --descriptor cf,cfhks
       cfsig evaluate shrec07/ --classes shrec07.cla --json
       cfsig evaluate --index shrec07.h5 --plot pr.png --report report/
+      cfsig evaluate --index shrec07.h5 --partial scans/
     """
     if (folder is None) == (index_file is None):
         raise click.UsageError("give a FOLDER or --index, not both")
+    if parts:
+        if not index_file or classes or plot or report_dir or descriptors:
+            raise click.UsageError("--partial takes --index and --json only")
+        _evaluate_partial(index_file, parts, as_json)
+        return
     if index_file and descriptors:
         raise click.UsageError("--descriptor is for a FOLDER: an index holds one descriptor")
     wanted = _descriptor_list(descriptors)
@@ -537,6 +566,20 @@ def evaluate(
     if routes and not as_json:
         click.echo(_format_routes(routes))
     _report_skipped(skipped, strict)
+
+
+def _evaluate_partial(index_file: Path, parts: Path, as_json: bool) -> None:
+    """Print the measures of partial queries against an index, and the parts that failed."""
+    from .evaluate import evaluate_partial
+
+    try:
+        report, failures = evaluate_partial(index_file, parts)
+    except CfsigError as exc:
+        _fail(str(exc))
+    except ValueError as exc:
+        _fail(f"{parts}: {exc}")
+    click.echo(json.dumps(report.to_dict(), indent=2) if as_json else _format_report(report))
+    _report_skipped(failures, strict=False)
 
 
 def _descriptor_list(text: str | None) -> list[str]:

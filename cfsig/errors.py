@@ -27,3 +27,7 @@ class ClusterError(CfsigError):
 
 class StageLimitError(MeshError):
     """An isolated stage (`cfsig.isolate`) ran out of time or memory, crashed or failed."""
+
+
+class PartialError(CfsigError):
+    """A partial query was asked of an index whose descriptor has no channel for it."""

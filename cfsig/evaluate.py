@@ -20,10 +20,11 @@ from .batch import Progress, compute_many, successes
 from .cla import labels_from_cla
 from .errors import MeshError
 from .index import IndexReader
-from .measures import RetrievalReport, evaluate_distances
+from .measures import RetrievalReport, evaluate_distances, evaluate_queries
 from .mesh import find_meshes, mesh_label
 from .nearest import l1_distances
 from .params import Params, signature_length
+from .parts import curvature_columns, expanded_distances, partial_file
 
 
 @dataclass(frozen=True)
@@ -210,6 +211,60 @@ def collection_from_index(path: str | os.PathLike) -> tuple[str, Collection]:
     with IndexReader(path) as reader:
         names, labels, paths = (tuple(reader.column(key)) for key in ("names", "labels", "paths"))
         return reader.params.descriptor, Collection(names, labels, paths, reader.signatures[:])
+
+
+def evaluate_partial(
+    index: str | os.PathLike, folder: str | os.PathLike
+) -> tuple[RetrievalReport, list[str]]:
+    """Partial queries from a labelled folder against the whole shapes of an index.
+
+    Each mesh of ``folder`` is a part (a cut, a scan, a shape with holes) whose class is the
+    name of the folder holding it; it is ranked against every indexed mesh as
+    `cfsig.parts.partial_search` ranks them, and the relevant ones are the indexed meshes of
+    its class (`evaluate_queries`).
+
+    Parameters
+    ----------
+    index : str or os.PathLike
+        An index of ``cfhks`` version 3 or later.
+    folder : str or os.PathLike
+        Walked recursively for OFF, OBJ, PLY and STL files.
+
+    Returns
+    -------
+    report : RetrievalReport
+        Over the parts whose class is indexed.
+    failures : list of str
+        One line per part that could not be read or solved, ``<file>: <reason>``.
+
+    Raises
+    ------
+    IndexFileError
+        As `collection_from_index`.
+    PartialError
+        The index's descriptor has no curvature channel.
+    MeshError
+        The folder holds no mesh file, or no part could be computed.
+    ValueError
+        No part's class is in the index.
+    """
+    with IndexReader(index) as reader:
+        params = reader.params
+        curvature_columns(params)
+        labels, signatures = reader.column("labels"), reader.signatures[:]
+    found = dict(find_meshes([folder]))
+    if not found:
+        raise MeshError(f"{folder}: no mesh files")
+    rows, asked, failures = [], [], []
+    for path in found:
+        try:
+            rows.append(expanded_distances(partial_file(path, params), signatures, params))
+            asked.append(mesh_label(path))
+        except MeshError as exc:
+            failures.append(str(exc))
+    if not rows:
+        raise MeshError(f"{folder}: no part could be computed")
+    return evaluate_queries(np.array(rows), asked, [str(label) for label in labels]), failures
 
 
 def evaluate_collections(

@@ -52,6 +52,9 @@ class RetrievalReport:
     class_precision_recall : dict[str, np.ndarray]
         Class name -> shape (20,): interpolated precision at recall 0.05, ..., 1.00 averaged
         over that class's queries (the classes of ``per_class``).
+    per_query : np.ndarray
+        Shape (q, 6): the six measures of each query, in the order of the distance matrix's
+        rows; NaN for a query that was not evaluated.
     """
 
     measures: dict[str, float]
@@ -59,6 +62,7 @@ class RetrievalReport:
     precision_recall: np.ndarray
     count: int
     class_precision_recall: dict[str, np.ndarray] = field(default_factory=dict)
+    per_query: np.ndarray = field(default_factory=lambda: np.zeros((0, len(MEASURES))))
 
     def to_dict(self) -> dict:
         """Return the report as plain JSON-serialisable Python.
@@ -95,18 +99,28 @@ def _class_scores(
     """Per-query measures (q, 6) and interpolated precision (q, 20) for one class's queries."""
     n = distances.shape[0]
     q = queries.size
-    nrel = q - 1
     order = _stable_argsort(distances[queries])
     order = order[order != queries[:, None]].reshape(q, n - 1)  # leave the query out
-    pos = np.nonzero((codes == code)[order])[1].reshape(q, nrel)  # 0-based ranks of relevant
-    gain = 1.0 / np.log2(np.maximum(np.arange(1, n), 2))  # rank 1 -> 1, rank i >= 2 -> 1/log2 i
+    return _ranked_scores(order, codes, code)
+
+
+def _ranked_scores(
+    order: np.ndarray, codes: np.ndarray, code: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-query measures (q, 6) and interpolated precision (q, 20) of rankings (q, m) of
+    models, the relevant ones those of class ``code``."""
+    q, m = order.shape
+    relevant = codes[order] == code
+    nrel = int(relevant[0].sum())
+    pos = np.nonzero(relevant)[1].reshape(q, nrel)  # 0-based ranks of the relevant models
+    gain = 1.0 / np.log2(np.maximum(np.arange(1, m + 1), 2))  # rank 1 -> 1, i >= 2 -> 1/log2 i
     precision = np.arange(1, nrel + 1) / (pos + 1.0)
     scores = np.column_stack(
         [
             pos[:, 0] == 0,
             np.mean(pos < nrel, axis=1),
             np.mean(pos < 2 * nrel, axis=1),
-            2.0 * np.sum(pos < _E_DEPTH, axis=1) / (min(_E_DEPTH, n - 1) + nrel),
+            2.0 * np.sum(pos < _E_DEPTH, axis=1) / (min(_E_DEPTH, m) + nrel),
             gain[pos].sum(axis=1) / gain[:nrel].sum(),
             precision.mean(axis=1),
         ]
@@ -163,22 +177,87 @@ def evaluate_distances(distances: np.ndarray, labels: Sequence[str]) -> Retrieva
     )
     if not (sizes >= 2).any():
         raise ValueError("no class has at least two members: nothing to retrieve")
-    scores: list[np.ndarray] = []
-    curves: list[np.ndarray] = []
-    per_class: dict[str, dict[str, float]] = {}
-    class_curves: dict[str, np.ndarray] = {}
-    for code in np.flatnonzero(sizes >= 2):
-        s, c = _class_scores(distances, codes, np.flatnonzero(codes == code), int(code))
-        scores.append(s)
-        curves.append(c)
-        per_class[str(names[code])] = dict(zip(MEASURES, map(float, s.mean(axis=0)), strict=True))
-        class_curves[str(names[code])] = c.mean(axis=0)
-    every = np.concatenate(scores)
-    precision = np.concatenate(curves).mean(axis=0)
+    per_class = {
+        str(names[code]): (
+            np.flatnonzero(codes == code),
+            *_class_scores(distances, codes, np.flatnonzero(codes == code), int(code)),
+        )
+        for code in np.flatnonzero(sizes >= 2)
+    }
+    return _report(per_class, len(distances))
+
+
+def evaluate_queries(
+    distances: np.ndarray, query_labels: Sequence[str], labels: Sequence[str]
+) -> RetrievalReport:
+    """Evaluate queries that are not in the collection, such as parts of its shapes.
+
+    Every model of the collection is a result of every query (nothing is left out) and the
+    relevant ones are the ``C`` models of the query's class; the measures are otherwise those
+    of `evaluate_distances`. Queries of a class absent from the collection are left out.
+
+    Parameters
+    ----------
+    distances : np.ndarray
+        Shape (q, n), float: ``distances[i, j]`` from query ``i`` to model ``j``.
+    query_labels : Sequence[str]
+        Length q: class name of each query.
+    labels : Sequence[str]
+        Length n: class name of each model.
+
+    Returns
+    -------
+    RetrievalReport
+        As `evaluate_distances`, averaged over the queries whose class is in the collection.
+
+    Raises
+    ------
+    ValueError
+        If ``distances`` is not (q, n) for the labels given, contains NaN, or no query's class
+        is in the collection.
+    """
+    distances = np.asarray(distances, dtype=float)
+    if distances.shape != (len(query_labels), len(labels)):
+        raise ValueError(
+            f"distances must be ({len(query_labels)}, {len(labels)}) for the labels given, "
+            f"got shape {distances.shape}"
+        )
+    if np.isnan(distances).any():
+        raise ValueError("distances contains NaN")
+    names, codes = np.unique(np.asarray([str(label) for label in labels]), return_inverse=True)
+    asked = np.asarray([str(label) for label in query_labels])
+    per_class = {
+        str(name): (
+            np.flatnonzero(asked == name),
+            *_ranked_scores(_stable_argsort(distances[asked == name]), codes, code),
+        )
+        for code, name in enumerate(names)
+        if (asked == name).any()
+    }
+    if not per_class:
+        raise ValueError("no query's class is in the collection: nothing to retrieve")
+    return _report(per_class, len(distances))
+
+
+def _report(
+    per_class: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]], queries: int
+) -> RetrievalReport:
+    """The report of (query rows, per-query measures, precision curves) grouped by class."""
+    every = np.concatenate([scores for _, scores, _ in per_class.values()])
+    precision = np.concatenate([curves for _, _, curves in per_class.values()]).mean(axis=0)
+    per_query = np.full((queries, len(MEASURES)), np.nan)
+    for rows, scores, _ in per_class.values():
+        per_query[rows] = scores
     return RetrievalReport(
         measures=dict(zip(MEASURES, map(float, every.mean(axis=0)), strict=True)),
-        per_class=per_class,
+        per_class={
+            name: dict(zip(MEASURES, map(float, scores.mean(axis=0)), strict=True))
+            for name, (_, scores, _) in per_class.items()
+        },
         precision_recall=np.column_stack([RECALL_LEVELS, precision]),
         count=len(every),
-        class_precision_recall=class_curves,
+        class_precision_recall={
+            name: curves.mean(axis=0) for name, (_, _, curves) in per_class.items()
+        },
+        per_query=per_query,
     )

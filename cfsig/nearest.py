@@ -62,7 +62,9 @@ def l1_distances(queries: np.ndarray, signatures: np.ndarray) -> np.ndarray:
     return out.astype(np.float64)
 
 
-def nearest(reader: IndexReader, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+def nearest(
+    reader: IndexReader, queries: np.ndarray, k: int, columns: slice | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """The k nearest indexed signatures of each query, streaming the index in blocks.
 
     All queries share one pass over the segments, made by one thread per core; memory stays
@@ -73,9 +75,12 @@ def nearest(reader: IndexReader, queries: np.ndarray, k: int) -> tuple[np.ndarra
     reader : IndexReader
         An open index with N entries.
     queries : (q, length) float
-        Query signatures, made with the index's parameters (and so its descriptor).
+        Query signatures, made with the index's parameters (and so its descriptor); with
+        ``columns``, only those columns of them.
     k : int
         Number of results per query; at most N are returned.
+    columns : slice, optional
+        Compare only these columns of the stored signatures (one channel of a descriptor).
 
     Returns
     -------
@@ -98,12 +103,14 @@ def nearest(reader: IndexReader, queries: np.ndarray, k: int) -> tuple[np.ndarra
 
     def work() -> None:
         block_rows = max(b.stop - b.start for _, b in blocks)
-        buffer = np.empty((block_rows, queries.shape[1]), np.float32)
+        buffer = np.empty((block_rows, reader.signatures.shape[1]), np.float32)
         group = max(1, _OUT_CELLS // block_rows)
         out = np.empty(min(group, len(queries)) * block_rows, np.float32)
         while (task := _next(todo, lock)) is not None:
             view, block = task
             rows = read_block(view.signatures, block, buffer)
+            if columns is not None:
+                rows = np.ascontiguousarray(rows[:, columns])
             dead = view.dead[(view.dead >= block.start) & (view.dead < block.stop)] - block.start
             live = None
             if len(dead):

@@ -36,8 +36,10 @@ def test_weighted_quantiles():
 def test_length_and_channels(version):
     v, f = _bumpy()
     design = cfhks.DESIGNS[version]
-    parts = cfhks.channels(conformal_factor(clean_mesh(v, f)), design.times)
+    parts = cfhks.channels(conformal_factor(clean_mesh(v, f)), design.times, design.scales)
     assert parts["phi"].shape == (cfhks.QUANTILES,)
+    assert parts["curvature"].shape == (len(design.scales), cfhks.CURVATURE_BINS)
+    assert np.allclose(parts["curvature"].sum(axis=1), 1.0)
     assert parts["spectrum"].shape == (cfhks.EIGENPAIRS,)
     assert parts["heat"].shape == (len(design.times), cfhks.QUANTILES)
     assert np.all(np.diff(parts["spectrum"]) >= 0) and np.all(np.diff(parts["heat"]) >= 0)

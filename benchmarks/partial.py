@@ -1,0 +1,241 @@
+"""Partial queries and genus changes on SHREC 2007, McGill and FAUST (docs/partial.md).
+
+    python benchmarks/partial.py --data-root /work/data --doc docs/partial.md
+
+For every mesh of each collection (``--data-root``, where ``../shared/data/unpack`` puts them)
+the script makes two parts, seeded by the mesh's position so that every run makes the same:
+
+- ``cut``: the mesh cut by a plane of random direction, keeping a random 20-80% of its area
+  (the largest connected piece; if no plane of 20 tries keeps 20-80% in one piece, the
+  geodesic disc of that area around a random point);
+- ``holes``: 5 to 20 geodesic discs around random points removed, 10-40% of the area together
+  (the largest connected piece is kept).
+
+Each part is a query against the collection's whole shapes, the part's own whole among them,
+relevant the wholes of its class (`cfsig.measures.evaluate_queries`), ranked three ways: as a
+whole shape (its ``cfhks`` signature, what ``cfsig query`` does), by the partial distance of
+the curvature channel alone (`cfsig.parts.partial_distances`), and as ``cfsig query --partial``
+ranks (`cfsig.parts.expanded_distances`). It also lists SHREC 2007's genus outliers, the meshes
+whose Euler characteristic is not their class's most common one, with their first tier (FT)
+against the other queries of their classes, for ``cfhks`` versions 2 and 3.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.update(
+    dict.fromkeys(["OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"], "1")
+)
+
+import argparse
+import collections
+import subprocess
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components, dijkstra
+
+from cfsig.conformal import operators
+from cfsig.geometry import mesh_edges
+from cfsig.measures import evaluate_distances, evaluate_queries
+from cfsig.mesh import Mesh, clean_mesh, read_mesh
+from cfsig.nearest import l1_distances
+from cfsig.params import Params
+from cfsig.parts import expanded_distances, partial_distances, partial_vectors
+from cfsig.signature import compute_signature
+
+ROOT = Path(__file__).resolve().parents[1]
+COLLECTIONS = ("shrec07", "mcgill", "faust")
+KINDS = ("cut", "holes")
+V3 = Params(descriptor="cfhks", version=3)
+V2 = Params(descriptor="cfhks", version=2)
+MEASURES = ("NN", "FT", "mAP")
+MARKER = "<!-- measured: what follows is written by benchmarks/partial.py -->"
+
+
+def _face_graph(vertices: np.ndarray, faces: np.ndarray) -> sp.csr_matrix:
+    """Faces sharing an edge, weighted by the distance of their centroids."""
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    order = np.lexsort((edges[:, 1], edges[:, 0]))
+    same = np.flatnonzero((np.diff(edges[order], axis=0) == 0).all(axis=1))
+    face = np.repeat(np.arange(len(faces)), 3)[order]
+    a, b = face[same], face[same + 1]
+    centroids = vertices[faces].mean(axis=1)
+    weight = np.linalg.norm(centroids[a] - centroids[b], axis=1) + 1e-12
+    return sp.coo_matrix((weight, (a, b)), shape=(len(faces),) * 2).tocsr()
+
+
+def _piece(mesh: Mesh, keep: np.ndarray) -> Mesh:
+    """The largest connected piece of the kept faces, as a checked mesh."""
+    faces = mesh.faces[keep]
+    _, labels = connected_components(_face_graph(mesh.vertices, faces), directed=False)
+    faces = faces[labels == np.argmax(np.bincount(labels))]
+    used, inverse = np.unique(faces, return_inverse=True)
+    return clean_mesh(mesh.vertices[used], inverse.reshape(-1, 3))
+
+
+def _area(mesh: Mesh) -> np.ndarray:
+    """Face areas."""
+    p = mesh.vertices[mesh.faces]
+    return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+
+
+def _nearest_faces(mesh: Mesh, seeds: np.ndarray, share: float) -> np.ndarray:
+    """The faces nearest to the seed faces (geodesically) that hold ``share`` of the area."""
+    area = _area(mesh)
+    distance = dijkstra(_face_graph(mesh.vertices, mesh.faces), indices=seeds, min_only=True)
+    order = np.argsort(distance, kind="stable")
+    chosen = np.zeros(len(area), bool)
+    chosen[order[: np.searchsorted(np.cumsum(area[order]) / area.sum(), share) + 1]] = True
+    return chosen
+
+
+def cut(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """A plane cut keeping 20-80% of the area in one piece (see the module's docstring)."""
+    area = _area(mesh)
+    share = rng.uniform(0.2, 0.8)
+    centroids = mesh.vertices[mesh.faces].mean(axis=1)
+    for _ in range(20):
+        direction = rng.normal(size=3)
+        order = np.argsort(centroids @ direction)
+        keep = np.zeros(len(area), bool)
+        keep[order[: np.searchsorted(np.cumsum(area[order]) / area.sum(), share) + 1]] = True
+        part = _piece(mesh, keep)
+        if 0.2 <= _area(part).sum() / area.sum() <= 0.8:
+            return part
+    seed = rng.choice(len(area), p=area / area.sum())
+    return _piece(mesh, _nearest_faces(mesh, np.array([seed]), share))
+
+
+def holes(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """The mesh with 5-20 geodesic discs, 10-40% of the area, removed."""
+    area = _area(mesh)
+    seeds = rng.choice(len(area), int(rng.integers(5, 21)), replace=False, p=area / area.sum())
+    return _piece(mesh, ~_nearest_faces(mesh, seeds, rng.uniform(0.1, 0.4)))
+
+
+def _one(item: tuple[Path, int]) -> dict:
+    """The wholes' signatures of one mesh, and its parts' vectors, shares and signatures."""
+    path, seed = item
+    rng = np.random.default_rng(seed)
+    mesh = read_mesh(path)
+    row: dict = {
+        "v3": compute_signature(mesh, V3).vector,
+        "v2": compute_signature(mesh, V2).vector,
+        "chi": len(mesh.vertices)
+        - len(mesh_edges(mesh.faces, len(mesh.vertices)).ends)
+        + len(mesh.faces),
+    }
+    for kind, make in (("cut", cut), ("holes", holes)):
+        part = make(mesh, rng)
+        row[f"{kind} share"] = _area(part).sum() / _area(mesh).sum()
+        row[f"{kind} partial"] = partial_vectors(operators(part, V3.mollify), V3)
+        row[f"{kind} whole"] = compute_signature(part, V3).vector
+    return row
+
+
+def _measure(name: str, data_root: Path, jobs: int, every: int) -> dict:
+    """Every row of one collection (every k-th mesh), and its labels."""
+    paths = sorted((data_root / name).glob("*/*.off"))[::every]
+    if not paths:
+        raise SystemExit(f"no meshes under {data_root / name}: ../shared/data/unpack {name}")
+    with ProcessPoolExecutor(jobs) as pool:
+        rows = list(pool.map(_one, [(p, i) for i, p in enumerate(paths)], chunksize=2))
+    return {
+        "labels": [p.parent.name for p in paths],
+        "names": [f"{p.parent.name}/{p.name}" for p in paths],
+        **{key: np.array([row[key] for row in rows]) for key in rows[0]},
+    }
+
+
+def _partial_table(results: dict[str, dict]) -> list[str]:
+    """The measures of the parts, per collection, kind and ranking."""
+    lines = [
+        "| collection | parts | share of the area (median, range) | ranked | NN | FT | mAP |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name, data in results.items():
+        labels = data["labels"]
+        wholes = data["v3"]
+        for kind in KINDS:
+            share = data[f"{kind} share"]
+            rankings = {
+                "as a whole shape": l1_distances(data[f"{kind} whole"], wholes),
+                "partial distance": np.array(
+                    [partial_distances(v, wholes, V3) for v in data[f"{kind} partial"]]
+                ),
+                "--partial": np.array(
+                    [expanded_distances(v, wholes, V3) for v in data[f"{kind} partial"]]
+                ),
+            }
+            for ranked, distances in rankings.items():
+                m = evaluate_queries(distances, labels, labels).measures
+                spread = f"{np.median(share):.2f} ({share.min():.2f}-{share.max():.2f})"
+                cells = " | ".join(f"{m[k]:.3f}" for k in MEASURES)
+                lines.append(f"| {name} | {kind} | {spread} | {ranked} | {cells} |")
+    return lines
+
+
+def _genus_table(data: dict) -> list[str]:
+    """SHREC 2007's genus outliers and their FT against their classes' other queries."""
+    labels = np.array(data["labels"])
+    chi = data["chi"]
+    common = {c: collections.Counter(chi[labels == c]).most_common(1)[0][0] for c in set(labels)}
+    outlier = np.array([chi[i] != common[c] for i, c in enumerate(labels)])
+    mixed = np.isin(labels, labels[outlier])
+    lines = ["| descriptor | outliers FT | other queries of their classes FT | all NN | all FT |"]
+    lines.append("|---|---|---|---|---|")
+    for key, title in (("v2", "cfhks 2"), ("v3", "cfhks 3")):
+        report = evaluate_distances(l1_distances(data[key], data[key]), labels)
+        ft = report.per_query[:, 1]
+        lines.append(
+            f"| {title} | {ft[outlier].mean():.3f} | {ft[mixed & ~outlier].mean():.3f} | "
+            f"{report.measures['NN']:.3f} | {report.measures['FT']:.3f} |"
+        )
+    names = [
+        f"{data['names'][i]} (chi {chi[i]}, class {common[labels[i]]})"
+        for i in np.flatnonzero(outlier)
+    ]
+    return [*lines, "", f"The {len(names)} outliers: " + "; ".join(names) + "."]
+
+
+def main() -> None:
+    """Measure, print and write the Markdown."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data-root", type=Path, default=ROOT.parent / "shared" / "data")
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes")
+    parser.add_argument("--doc", type=Path, help="write the tables into this Markdown file")
+    parser.add_argument("--every", type=int, default=1, help="every k-th mesh (a quick look)")
+    args = parser.parse_args()
+    results = {}
+    for name in COLLECTIONS:
+        results[name] = _measure(name, args.data_root, args.jobs, args.every)
+        print(f"{name}: {len(results[name]['labels'])} meshes", flush=True)
+    commit = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True
+    ).stdout.strip()
+    text = "\n".join(
+        [
+            f"Measured on commit {commit} by `python benchmarks/partial.py --data-root "
+            f"{args.data_root} --doc {args.doc}`.",
+            "",
+            "### Parts against the whole collections",
+            "",
+            *_partial_table(results),
+            "",
+            "### Genus outliers of SHREC 2007",
+            "",
+            *_genus_table(results["shrec07"]),
+        ]
+    )
+    print(text)
+    if args.doc:
+        head = args.doc.read_text().split(MARKER)[0] if args.doc.exists() else ""
+        args.doc.write_text(f"{head}{MARKER}\n\n{text}\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,57 @@
+import numpy as np
+import pytest
+
+from cfsig import cfhks
+from cfsig.conformal import operators
+from cfsig.curvature import smoothed_curvature
+from cfsig.mesh import clean_mesh
+from tests.helpers import disk, icosphere, random_rotation, torus
+
+SCALES = (0.0000625, 0.001, 0.01)
+
+
+def _curvature(v, f, scales=SCALES):
+    ops = operators(clean_mesh(v, f))
+    return ops, smoothed_curvature(ops, scales)
+
+
+def test_sphere_is_four_pi_everywhere():
+    _, values = _curvature(*icosphere(4), scales=(0.001, 0.01))
+    assert np.allclose(values, 4 * np.pi, rtol=0.02)
+
+
+@pytest.mark.parametrize("mesh", [icosphere(3), torus()], ids=["sphere", "torus"])
+def test_diffusion_keeps_the_total_curvature(mesh):
+    ops, values = _curvature(*mesh)
+    area = ops.vertex_area.sum()
+    totals = (ops.vertex_area[:, None] * values).sum(axis=0) / area
+    assert np.allclose(totals, ops.curvature.sum(), atol=1e-8)  # Gauss-Bonnet: 4 pi, 0
+
+
+def test_larger_scales_are_smoother():
+    v, f = icosphere(3)
+    _, values = _curvature(v * [1.0, 0.6, 0.4], f)
+    spread = values.std(axis=0)
+    assert spread[0] > spread[1] > spread[2] > 0
+
+
+def test_invariant_to_scale_and_rigid_motion():
+    v, f = icosphere(3)
+    v = v * [1.0, 0.7, 0.5]
+    _, values = _curvature(v, f)
+    _, moved = _curvature(3.0 * v @ random_rotation(1).T + [1.0, -2.0, 0.5], f)
+    assert np.allclose(values, moved, rtol=1e-7, atol=1e-9)
+
+
+def test_boundary_turning_is_not_curvature():
+    ops, values = _curvature(*disk())  # flat: no curvature inside, the boundary turns 2 pi
+    assert ops.boundary.any() and np.allclose(values, 0.0, atol=1e-9)
+
+
+def test_histograms_weigh_by_area():
+    values = np.array([[0.0], [1e6], [-1e6]])
+    hist = cfhks.curvature_histograms(values, np.array([2.0, 1.0, 1.0]))
+    assert hist.shape == (1, cfhks.CURVATURE_BINS)
+    assert hist[0, cfhks.CURVATURE_BINS // 2] == 0.5  # asinh(0) in the middle bin
+    assert hist[0, 0] == hist[0, -1] == 0.25  # beyond the range: the end bins
+    assert cfhks.curvature_histograms(np.empty((3, 0)), np.ones(3)).shape == (0, 48)

@@ -1,0 +1,113 @@
+"""Tests for cfsig.parts and evaluate_queries: partial queries against whole shapes."""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cfsig.cli import main
+from cfsig.conformal import operators
+from cfsig.errors import PartialError
+from cfsig.measures import evaluate_queries
+from cfsig.mesh import clean_mesh
+from cfsig.params import Params
+from cfsig.parts import SHARES, curvature_columns, partial_vectors
+from cfsig.signature import compute_signature
+from tests.helpers import icosphere, open_cylinder, torus, write_off
+
+CFHKS = Params(descriptor="cfhks")
+
+
+def _bumpy():
+    v, f = icosphere(3)
+    v = v * [1.0, 0.6, 0.5]
+    v[:, 0] += 1.5 * np.clip(v[:, 0], 0, None) ** 4
+    return v, f
+
+
+def _cut(v, f, keep):
+    """The faces whose centroid has x < keep, their vertices renumbered."""
+    kept = f[v[f].mean(axis=1)[:, 0] < keep]
+    used, inverse = np.unique(kept, return_inverse=True)
+    return v[used], inverse.reshape(-1, 3)
+
+
+def test_only_the_curvature_channel_takes_partial_queries():
+    columns = curvature_columns(CFHKS)
+    assert columns.stop == 686 and columns.stop - columns.start == 3 * 48
+    for params in (Params(), Params(descriptor="cfhks", version=2)):
+        with pytest.raises(PartialError, match="rebuild it"):
+            curvature_columns(params)
+
+
+def test_a_whole_as_its_own_part_matches_its_signature():
+    mesh = clean_mesh(*_bumpy())
+    vectors = partial_vectors(operators(mesh), CFHKS)
+    assert vectors.shape == (len(SHARES), 3 * 48) and SHARES[0] == 1.0
+    stored = compute_signature(mesh, CFHKS).vector[curvature_columns(CFHKS)]
+    assert np.allclose(vectors[0], stored)
+
+
+def test_evaluate_queries_by_hand():
+    distances = np.array([[0.1, 0.5, 0.2], [0.3, 0.2, 0.1]])
+    report = evaluate_queries(distances, ["a", "b"], ["a", "a", "b"])
+    a, b = report.per_class["a"], report.per_class["b"]
+    assert a["NN"] == 1 and a["FT"] == 0.5 and a["mAP"] == pytest.approx((1 + 2 / 3) / 2)
+    assert b["NN"] == 1 and b["FT"] == 1 and report.count == 2
+    assert np.array_equal(report.per_query[:, 1], [0.5, 1.0])
+    with pytest.raises(ValueError, match="no query's class"):
+        evaluate_queries(distances, ["c", "c"], ["a", "a", "b"])
+
+
+@pytest.fixture(scope="module")
+def wholes(tmp_path_factory):
+    """An index of four kinds of whole shape, two of each, and parts cut from them."""
+    root = tmp_path_factory.mktemp("parts")
+    shapes = {
+        "torus": torus(),
+        "bumpy": _bumpy(),
+        "sphere": icosphere(3),
+        "tube": open_cylinder(),  # open at both ends: the index's repair stage closes it
+    }
+    for name, (v, f) in shapes.items():
+        for copy in range(2):
+            write_off(root / "wholes" / name / f"{copy}.off", v * (1 + copy), f)
+    for name in ("torus", "bumpy"):
+        v, f = shapes[name]
+        write_off(root / "parts" / name / "cut.off", *_cut(v, f, 0.3))
+    index = root / "index"
+    result = CliRunner().invoke(main, ["index", str(root / "wholes"), "-o", str(index)])
+    assert result.exit_code == 0, result.output
+    return root, index
+
+
+def test_query_partial_finds_the_whole(wholes):
+    root, index = wholes
+    for name in ("torus", "bumpy"):
+        part = root / "parts" / name / "cut.off"
+        result = CliRunner().invoke(main, ["query", str(index), str(part), "--partial", "--json"])
+        assert result.exit_code == 0, result.output
+        hits = json.loads(result.output)
+        assert hits[0]["label"] == name and hits[0]["distance"] == 0.0
+        assert [h["rank"] for h in hits] == list(range(1, len(hits) + 1))
+
+
+def test_evaluate_partial(wholes):
+    root, index = wholes
+    args = ["evaluate", "--index", str(index), "--partial", str(root / "parts"), "--json"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    assert report["count"] == 2 and report["measures"]["NN"] == 1.0
+
+
+def test_partial_query_of_an_old_index_is_refused(tmp_path, wholes):
+    root, _ = wholes
+    index = tmp_path / "v2"
+    args = ["index", str(root / "wholes"), "-o", str(index), "--descriptor", "cf"]
+    assert CliRunner().invoke(main, args).exit_code == 0
+    part = root / "parts" / "torus" / "cut.off"
+    result = CliRunner().invoke(main, ["query", str(index), str(part), "--partial"])
+    assert result.exit_code != 0 and "rebuild it" in result.output
+    assert "Traceback" not in result.output and len(result.output.strip().splitlines()) == 1
