@@ -6,10 +6,11 @@ For every mesh of each collection (``--data-root``, where ``../shared/data/unpac
 the script makes two parts, seeded by the mesh's position so that every run makes the same:
 
 - ``cut``: the mesh cut by a plane of random direction, keeping a random 20-80% of its area
-  (the largest connected piece; if no plane of 20 tries keeps 20-80% in one piece, the
-  geodesic disc of that area around a random point);
-- ``holes``: 5 to 20 geodesic discs around random points removed, 10-40% of the area together
-  (the largest connected piece is kept).
+  (the largest connected piece; if no plane of 20 tries keeps 20-80% in one piece, a geodesic
+  disc of that area around a random point, 20 tries; else the try closest to the range);
+- ``holes``: 5 to 20 geodesic discs around random points removed, 10-40% of the area together,
+  the largest connected piece kept if it holds at least half the area (20 tries; else the try
+  with the largest).
 
 Each part is a query against the collection's whole shapes, the part's own whole among them,
 relevant the wholes of its class (`cfsig.measures.evaluate_queries`), ranked three ways: as a
@@ -93,28 +94,45 @@ def _nearest_faces(mesh: Mesh, seeds: np.ndarray, share: float) -> np.ndarray:
     return chosen
 
 
+def _closest(candidates: list[Mesh], whole: float, low: float, high: float) -> Mesh:
+    """The first candidate whose share of the whole's area is in [low, high], else the closest."""
+    shares = [_area(c).sum() / whole for c in candidates]
+    misses = [max(low - share, share - high, 0.0) for share in shares]
+    return candidates[int(np.argmin(misses))]
+
+
 def cut(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     """A plane cut keeping 20-80% of the area in one piece (see the module's docstring)."""
     area = _area(mesh)
     share = rng.uniform(0.2, 0.8)
     centroids = mesh.vertices[mesh.faces].mean(axis=1)
-    for _ in range(20):
-        direction = rng.normal(size=3)
-        order = np.argsort(centroids @ direction)
-        keep = np.zeros(len(area), bool)
-        keep[order[: np.searchsorted(np.cumsum(area[order]) / area.sum(), share) + 1]] = True
-        part = _piece(mesh, keep)
-        if 0.2 <= _area(part).sum() / area.sum() <= 0.8:
-            return part
-    seed = rng.choice(len(area), p=area / area.sum())
-    return _piece(mesh, _nearest_faces(mesh, np.array([seed]), share))
+    candidates = []
+    for attempt in range(40):
+        if attempt < 20:
+            order = np.argsort(centroids @ rng.normal(size=3))
+            keep = np.zeros(len(area), bool)
+            keep[order[: np.searchsorted(np.cumsum(area[order]) / area.sum(), share) + 1]] = True
+        else:  # a geodesic disc of that area
+            seed = np.array([rng.choice(len(area), p=area / area.sum())])
+            keep = _nearest_faces(mesh, seed, share)
+        candidates.append(_piece(mesh, keep))
+        if 0.2 <= _area(candidates[-1]).sum() / area.sum() <= 0.8:
+            break
+    return _closest(candidates, area.sum(), 0.2, 0.8)
 
 
 def holes(mesh: Mesh, rng: np.random.Generator) -> Mesh:
-    """The mesh with 5-20 geodesic discs, 10-40% of the area, removed."""
+    """The mesh with 5-20 geodesic discs, 10-40% of the area, removed, one piece kept that
+    holds at least half the area (20 tries, else the largest)."""
     area = _area(mesh)
-    seeds = rng.choice(len(area), int(rng.integers(5, 21)), replace=False, p=area / area.sum())
-    return _piece(mesh, ~_nearest_faces(mesh, seeds, rng.uniform(0.1, 0.4)))
+    candidates = []
+    for _ in range(20):
+        count = int(rng.integers(5, 21))
+        seeds = rng.choice(len(area), count, replace=False, p=area / area.sum())
+        candidates.append(_piece(mesh, ~_nearest_faces(mesh, seeds, rng.uniform(0.1, 0.4))))
+        if _area(candidates[-1]).sum() / area.sum() >= 0.5:
+            break
+    return _closest(candidates, area.sum(), 0.5, 1.0)
 
 
 def _one(item: tuple[Path, int]) -> dict:

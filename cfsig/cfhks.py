@@ -30,7 +30,7 @@ Versions (`Params.version`; an index stores its own, and a query recomputes with
 2. Eight times (0.0025 to 0.32, doubling), weights 0 (phi: left out of the vector), 1
    (spectrum) and 3 (heat, its distance averaged over the times), chosen on SHREC 2007 and
    McGill together, with the medians averaged over those two collections.
-3. Version 2 plus curvature at three scales (0.0000625 to 0.001, quadrupling), weighed like
+3. Version 2 plus curvature at four scales (0.0000156 to 0.001, quadrupling), weighed like
    all of version 2 together, chosen on SHREC 2007 and FAUST (McGill held out).
 """
 
@@ -96,12 +96,13 @@ _V2_TIMES = tuple(0.0025 * 2.0**j for j in range(8))
 # version 1 over SHREC 2007's pairs; version 2 the mean of SHREC 2007's and McGill's, each
 # divided by its channel's weight (heat 3, its time average taken by the divisor).
 _V2 = Design(_V2_TIMES, None, 0.3173, (len(_V2_TIMES) * 0.2152 / 3,) * len(_V2_TIMES))
-# Version 3's curvature divisor: the median curvature distance over SHREC 2007's and FAUST's
-# pairs, relative to the median of version 2's distance there (weight 1, docs/descriptors.md).
+# Version 3's scales and curvature divisor, printed by `python benchmarks/descriptors.py study3`:
+# the median curvature distance over SHREC 2007's and FAUST's pairs, relative to the median of
+# version 2's distance there (weight 1, docs/descriptors.md).
 DESIGNS = {
     1: Design((0.005, 0.01, 0.02, 0.04), 1.834, 0.2815, tuple(s * 4.038 for s in _V1_HEAT)),
     2: _V2,
-    3: replace(_V2, scales=(0.0000625, 0.00025, 0.001), curvature=0.011336),
+    3: replace(_V2, scales=tuple(0.0000625 * 4.0**j for j in range(-1, 3)), curvature=0.015153),
 }
 
 

@@ -11,7 +11,7 @@ VERSIONS = {"cf": (1,), "cfhks": (1, 2, 3)}
 REPAIR_MODES = ("auto", "off", "proxy")
 # The length of the cfhks vector per version, `cfsig.cfhks.DESIGNS[version].length`
 # (tests/test_cfhks.py checks that the two agree), here so that an index needs no SciPy.
-CFHKS_LENGTHS = {1: 64 + 30 + 64 * 4, 2: 30 + 64 * 8, 3: 30 + 64 * 8 + 48 * 3}
+CFHKS_LENGTHS = {1: 64 + 30 + 64 * 4, 2: 30 + 64 * 8, 3: 30 + 64 * 8 + 48 * 4}
 SOLVERS = ("auto", "cholmod", "eigen", "scipy")  # sparse solver backends (`cfsig.conformal`)
 
 
@@ -28,7 +28,7 @@ class Params:
         What the signature is (one of `DESCRIPTORS`; docs/descriptors.md): ``"cf"``, the
         paper's histogram of phi, to which every other attribute applies; ``"cfhks"``, the
         low Laplace-Beltrami spectrum and heat kernel signatures (version 1 also the quantiles
-        of phi, version 3 also the curvature at three scales), whose constants are fixed per
+        of phi, version 3 also the curvature at four scales), whose constants are fixed per
         version in `cfsig.cfhks` and which uses only ``mollify`` and ``repair`` of the others.
     bins : int
         Number of histogram bins (paper section 2.3: 200).

@@ -162,3 +162,11 @@ def test_evaluate_side_by_side(collection):
 def test_evaluate_rejects_bad_descriptor_lists(collection, given):
     result = CliRunner().invoke(main, ["evaluate", str(collection), "--descriptor", given])
     assert result.exit_code == 2 and "--descriptor" in result.output
+
+
+def test_version_3_extends_version_2():
+    mesh = clean_mesh(*_bumpy())
+    v2 = compute_signature(mesh, Params(descriptor="cfhks", version=2)).vector
+    v3 = compute_signature(mesh, Params(descriptor="cfhks", version=3)).vector
+    assert np.array_equal(v3[: len(v2)], v2)
+    assert len(v3) == len(v2) + len(cfhks.DESIGNS[3].scales) * cfhks.CURVATURE_BINS

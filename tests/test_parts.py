@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from cfsig import cfhks
 from cfsig.cli import main
 from cfsig.conformal import operators
 from cfsig.errors import PartialError
 from cfsig.measures import evaluate_queries
 from cfsig.mesh import clean_mesh
-from cfsig.params import Params
+from cfsig.params import Params, signature_length
 from cfsig.parts import SHARES, curvature_columns, partial_vectors
 from cfsig.signature import compute_signature
 from tests.helpers import icosphere, open_cylinder, torus, write_off
@@ -35,7 +36,9 @@ def _cut(v, f, keep):
 
 def test_only_the_curvature_channel_takes_partial_queries():
     columns = curvature_columns(CFHKS)
-    assert columns.stop == 686 and columns.stop - columns.start == 3 * 48
+    design = cfhks.DESIGNS[CFHKS.version]
+    assert columns.stop == design.length == signature_length(CFHKS)
+    assert columns.stop - columns.start == len(design.scales) * cfhks.CURVATURE_BINS
     for params in (Params(), Params(descriptor="cfhks", version=2)):
         with pytest.raises(PartialError, match="rebuild it"):
             curvature_columns(params)
@@ -44,7 +47,8 @@ def test_only_the_curvature_channel_takes_partial_queries():
 def test_a_whole_as_its_own_part_matches_its_signature():
     mesh = clean_mesh(*_bumpy())
     vectors = partial_vectors(operators(mesh), CFHKS)
-    assert vectors.shape == (len(SHARES), 3 * 48) and SHARES[0] == 1.0
+    columns = curvature_columns(CFHKS)
+    assert vectors.shape == (len(SHARES), columns.stop - columns.start) and SHARES[0] == 1.0
     stored = compute_signature(mesh, CFHKS).vector[curvature_columns(CFHKS)]
     assert np.allclose(vectors[0], stored)
 
