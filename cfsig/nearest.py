@@ -164,8 +164,11 @@ class _Pruned:
 
     def search(self, queries: np.ndarray) -> None:
         """Merge the nearest rows of every query into ``best``, a group of queries at a time."""
+        if max(_FIRST, 4 * self.best.k) * _SCAN_RATIO >= self.live:  # most rows would be read
+            _scan(self.views, queries, self.kernel, self.best, 0)
+            return
         n = len(self.excluded)
-        group = max(1, _BOUND_CELLS // max(n, 1))
+        group = max(1, _BOUND_CELLS // n)
         sketch_kernel = choose_kernel(len(queries) * self.live)
         for q0 in range(0, len(queries), group):
             some = queries[q0 : q0 + group]
@@ -208,19 +211,22 @@ class _Pruned:
         """Exact distances of about the `_FIRST` rows of smallest bounds; return their cutoff.
 
         The rows evaluated are those whose bound is at most the cutoff, estimated from a
-        sample of the bounds.
+        sample of the bounds, and raised until k distances are known.
         """
-        want = max(_FIRST, 4 * self.best.k)
-        cutoff = np.float32(np.inf)
-        if want < self.live:
-            step = max(1, len(bounds) // _SAMPLE)
-            sample = bounds[::step][~self.excluded[::step]]
-            nth = max(1, want // step)
-            if nth < len(sample):
-                cutoff = np.partition(sample, nth - 1)[nth - 1]
-        rows = np.flatnonzero(~(bounds > cutoff))
-        self._exact(j, query, rows[~self.excluded[rows]])
-        return cutoff
+        step = max(1, len(bounds) // _SAMPLE)
+        sample = np.sort(bounds[::step][~self.excluded[::step]])
+        nth = -(-max(_FIRST, 4 * self.best.k) // step)
+        done = None
+        while True:
+            cutoff = sample[nth - 1] if nth <= len(sample) else np.float32(np.inf)
+            chosen = ~(bounds > cutoff)  # NaN bounds too: they rule nothing out
+            if done is not None:
+                chosen &= bounds > done
+            rows = np.flatnonzero(chosen)
+            self._exact(j, query, rows[~self.excluded[rows]])
+            if np.isfinite(self.best.kth(j)) or not np.isfinite(cutoff):
+                return cutoff
+            done, nth = cutoff, 4 * nth
 
     def _candidates(self, j: int, bounds: np.ndarray, cutoff: np.float32) -> np.ndarray:
         """The rows not evaluated yet that the k-th best distance of query j does not rule out."""

@@ -26,6 +26,7 @@ import numpy as np
 GROUP = 16  # coordinates summed per sketch entry: docs/index-scale.md
 _U = 2.0**-24  # unit roundoff of float32
 _TINY = 2.0**-40  # bounds the float64 error of a group sum, relative to the sum of magnitudes
+_ROWS = 8192  # rows sketched at a time
 
 
 @dataclass(frozen=True)
@@ -100,10 +101,10 @@ def group_sums(rows: np.ndarray, groups: np.ndarray) -> np.ndarray:
     -------
     sums : (m, g) float64
     """
-    rows = np.asarray(rows, np.float64).reshape(len(rows), -1)
+    rows = np.asarray(rows).reshape(len(rows), -1)
     if not len(rows):
         return np.zeros((0, len(groups)))
-    return np.add.reduceat(rows, groups, axis=1)
+    return np.add.reduceat(rows, groups, axis=1, dtype=np.float64)
 
 
 def sketch_rows(
@@ -127,14 +128,19 @@ def sketch_rows(
         The largest, over the rows with finite values, of the sum over groups of
         ``|stored - exact|``, plus a margin for the float64 sums; 0 for no such rows.
     """
-    exact = group_sums(rows, groups) - center
-    stored = exact.astype(np.float32)
-    if not len(rows):
-        return stored, 0.0
-    magnitude = np.abs(np.asarray(rows, np.float64)).sum(axis=1) + np.abs(center).sum()
-    error = np.abs(stored - exact).sum(axis=1) + _TINY * magnitude
-    finite = error[np.isfinite(error)]  # a row with NaN or infinity gets a bound of NaN or inf
-    return stored, float(finite.max()) if len(finite) else 0.0
+    stored = np.empty((len(rows), len(groups)), np.float32)
+    error = 0.0
+    for start in range(0, len(rows), _ROWS):  # bounds the float64 temporaries
+        some = rows[start : start + _ROWS]
+        exact = group_sums(some, groups) - center
+        stored[start : start + len(some)] = exact
+        magnitude = np.abs(some).sum(axis=1, dtype=np.float64) + np.abs(center).sum()
+        with np.errstate(invalid="ignore"):  # infinity less infinity
+            errors = np.abs(stored[start : start + len(some)] - exact).sum(axis=1)
+        errors += _TINY * magnitude
+        finite = errors[np.isfinite(errors)]  # a row with NaN or infinity: a NaN or inf bound
+        error = max(error, float(finite.max()) if len(finite) else 0.0)
+    return stored, error
 
 
 def query_sketches(queries: np.ndarray, sketch: Sketch) -> tuple[np.ndarray, np.ndarray]:
@@ -157,7 +163,8 @@ def query_sketches(queries: np.ndarray, sketch: Sketch) -> tuple[np.ndarray, np.
     exact = group_sums(queries, sketch.groups) - sketch.center
     stored = np.ascontiguousarray(exact, np.float32)
     magnitude = np.abs(np.asarray(queries, np.float64)).sum(axis=1) + np.abs(sketch.center).sum()
-    error = np.abs(stored - exact).sum(axis=1) + _TINY * magnitude + sketch.error
+    with np.errstate(invalid="ignore"):  # infinity less infinity: NaN, which prunes nothing
+        error = np.abs(stored - exact).sum(axis=1) + _TINY * magnitude + sketch.error
     return stored, _up(error * (1 + 4 * _U))
 
 
