@@ -58,6 +58,7 @@ BUILD_ROWS = 1_000_000
 PIECE_ROWS = 100_000  # synthetic rows generated at a time
 COMMIT = 200
 COMMITS = 100  # in the run of consecutive commits
+BATCH_STUDY = (100, 5000)  # largest batches measured besides compute_many's own
 NOISE = 0.02  # noise of a mixed row, in standard deviations of each coordinate over real rows
 K = 20
 
@@ -232,18 +233,17 @@ out = {{'seconds': time.perf_counter() - t}}
     return rows / in_child(code)["seconds"]
 
 
-def dask_run(path: Path, first: int, files: int, workers: int, batch: int | None) -> dict:
+def dask_run(path: Path, first: int, files: int, workers: int, batch: int) -> dict:
     """The stand-in computation on a local Dask cluster, its outcomes written to the index.
 
-    ``batch`` given fixes the number of files per task (1: a task per file, as before batches).
+    ``batch`` is the largest number of files per task (1: a task per file, as before batches).
     """
     from distributed import LocalCluster
 
     import cfsig.batch
     from cfsig.batch import compute_many
 
-    if batch is not None:
-        cfsig.batch._MAX_BATCH = batch
+    cfsig.batch._MAX_BATCH = batch
     with LocalCluster(
         n_workers=workers, threads_per_worker=1, dashboard_address=None, host="127.0.0.1"
     ) as cluster:
@@ -371,6 +371,41 @@ def storage_scan(rows: int = 1_000_000) -> dict[str, float]:
     return seconds
 
 
+def rankings_check(index: str) -> dict:
+    """Every row of a real index as a query, its 2(C - 1) + 1 nearest (C its class size) pruned
+    (forced, however few the rows) and by the full scan: whether rows and distances are equal,
+    NN, FT and ST from each ranking (the query itself left out), and the rows each computed."""
+    import cfsig.nearest
+    from cfsig.index import IndexReader
+    from cfsig.nearest import nearest
+
+    settings = {"PRUNE_MIN_ROWS": 0, "_SCAN_RATIO": 0, "_FIRST": 1}
+    saved = {key: getattr(cfsig.nearest, key) for key in settings}
+    with IndexReader(index) as reader:
+        labels = np.array(reader.column("labels"))
+        sizes = {c: int((labels == c).sum()) for c in set(labels)}
+        k = 2 * (max(sizes.values()) - 1) + 1
+        queries = reader.signatures[:]
+        full = nearest(reader, queries, k)
+        vars(cfsig.nearest).update(settings)
+        try:
+            pruned = nearest(reader, queries, k)
+        finally:
+            vars(cfsig.nearest).update(saved)
+    out: dict = {"identical": bool(np.array_equal(full[0], pruned[0]))}
+    out["identical"] &= bool(np.array_equal(full[1], pruned[1]))
+    for route, (rows, _) in (("full", full), ("pruned", pruned)):
+        nn, ft, st = [], [], []
+        for q, ranked in enumerate(rows):
+            others = labels[ranked[ranked != q]]
+            same, c = others == labels[q], sizes[labels[q]] - 1
+            nn.append(same[0])
+            ft.append(same[:c].sum() / c)
+            st.append(same[: 2 * c].sum() / c)
+        out[route] = {"NN": float(np.mean(nn)), "FT": float(np.mean(ft)), "ST": float(np.mean(st))}
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--real", default=None, help="an index of real cfhks signatures")
@@ -443,6 +478,18 @@ def main() -> None:
             if not args.keep:
                 shutil.rmtree(path, ignore_errors=True)
     if real is not None:
+        check = rankings_check(args.real)
+        print(json.dumps(check), flush=True)
+        tail += [
+            "",
+            "Every row of the real index as a query, its nearest by the pruned search (forced) "
+            f"and by the full scan: rows and distances identical: {check['identical']}; "
+            + "; ".join(
+                f"{route}: " + ", ".join(f"{m} {v:.3f}" for m, v in check[route].items())
+                for route in ("full", "pruned")
+            )
+            + ".",
+        ]
         study = group_study(real)
         print(json.dumps(study), flush=True)
         tail += [
@@ -475,9 +522,14 @@ def writer_measures(path: Path, n: int, files: int, workers: int) -> list[str]:
     run = commit_run(path, 2 * 10**9, COMMITS)
     times = sorted(run["times"])
     alone = writer_alone(path, 3 * 10**9, 20_000)
-    dask = dask_run(path, 4 * 10**9, files, workers, None)
+    from cfsig.batch import _MAX_BATCH as default  # before dask_run changes it
+
+    dask = dask_run(path, 4 * 10**9, files, workers, default)
     single = dask_run(path, 5 * 10**9, min(files, 5_000), workers, 1)
-    print(json.dumps({"run": run, "alone": alone, "dask": dask, "single": single}), flush=True)
+    others = {b: dask_run(path, (6 + i) * 10**9, files // 3, workers, b)
+              for i, b in enumerate(BATCH_STUDY)}  # fmt: skip
+    print(json.dumps({"run": run, "alone": alone, "dask": dask, "single": single,
+                      "others": others}), flush=True)  # fmt: skip
     return [
         "",
         f"{COMMITS} consecutive commits of 200 rows into the {n:,}-row index, one writer "
@@ -493,7 +545,12 @@ def writer_measures(path: Path, n: int, files: int, workers: int) -> list[str]:
         f"{dask['count']:,} files in {dask['wall']:.1f} s, **{dask['rate']:,.0f} signatures per "
         f"second**, the writer busy {100 * dask['busy']:.0f}% of the time; one file per task, "
         f"{single['count']:,} files in {single['wall']:.1f} s, {single['rate']:,.0f} per second, "
-        f"the writer busy {100 * single['busy']:.0f}%.",
+        f"the writer busy {100 * single['busy']:.0f}%. At most "
+        + ", ".join(
+            f"{b:,} files per task ({r['count']:,} files): {r['rate']:,.0f} per second"
+            for b, r in others.items()
+        )
+        + f" (`compute_many`: at most {default:,}).",
     ]
 
 

@@ -124,7 +124,7 @@ def _scan(
     ``queries`` are those of ``best`` from number ``first`` on.
     """
     blocks = [(view, b) for view in views for b in plan_blocks(view.signatures, _BLOCK_ROWS)]
-    block_rows = max(b.stop - b.start for _, b in blocks)
+    block_rows = max((b.stop - b.start for _, b in blocks), default=1)
     group = max(1, _OUT_CELLS // block_rows)
 
     def work(task: tuple[SegmentView, Block], buffer: np.ndarray, lock: threading.Lock) -> None:
@@ -188,7 +188,7 @@ class _Pruned:
         blocks = [
             (v, b) for v in self.views if v.sketch for b in plan_blocks(v.sketch.rows, _BLOCK_ROWS)
         ]
-        block_rows = max(b.stop - b.start for _, b in blocks)
+        block_rows = max((b.stop - b.start for _, b in blocks), default=1)
 
         def work(task: tuple[SegmentView, Block], buffer: np.ndarray, lock: threading.Lock) -> None:
             view, block = task
@@ -246,7 +246,7 @@ class _Pruned:
             which = np.searchsorted([b.start for b in plan], local, side="right") - 1
             cut = np.flatnonzero(np.diff(which, prepend=-1)).tolist() + [len(local)]
             tasks += [(int(i), local[a:b]) for a, b in zip(cut[:-1], cut[1:], strict=True)]
-        block_rows = max(b.stop - b.start for plan in self.plans for b in plan)
+        block_rows = max((b.stop - b.start for plan in self.plans for b in plan), default=1)
 
         def work(task: tuple[int, np.ndarray], buffer: np.ndarray, lock: threading.Lock) -> None:
             i, local = task
