@@ -64,8 +64,10 @@ def compute_many(
     grow with the number of files. Workers run with one BLAS/OpenMP thread each. Locally, a
     worker that dies (a crash in native code, the out-of-memory killer) fails only its own
     file: after a pool breaks, the files that were in flight are retried one at a time. On a
-    Dask cluster, a task whose worker dies is retried by Dask on another worker a few times,
-    then fails alone.
+    Dask cluster, files go in batches, as many per task as fit in about half a second of work
+    (one per task while the first results are awaited, at most 1,000): Dask's cost per task is
+    paid once per batch. A task whose worker dies is retried by Dask on another worker a few
+    times; if it still fails, its files are sent again one per task, and the bad one fails alone.
 
     Parameters
     ----------
