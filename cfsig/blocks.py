@@ -134,7 +134,8 @@ def read_rows(
     starts = np.array([b.start for b in blocks], np.int64)
     which = np.searchsorted(starts, rows, side="right") - 1
     row_bytes = dataset.shape[1] * _FLOAT32.itemsize
-    bounds = np.flatnonzero(np.diff(which, prepend=-1, append=len(blocks)))
+    handle = dataset.file.id.get_vfd_handle() if any(b.offset is not None for b in blocks) else -1
+    bounds = np.flatnonzero(np.diff(which, prepend=-1, append=len(blocks))).tolist()
     for first, last in zip(bounds[:-1], bounds[1:], strict=True):
         block = blocks[which[first]]
         local = rows[first:last] - block.start
@@ -142,10 +143,12 @@ def read_rows(
             whole = np.empty((block.stop - block.start, dataset.shape[1]), np.float32)
             got[first:last] = read_block(dataset, block, whole)[local]
             continue
-        breaks = np.flatnonzero(np.diff(local) != 1) + 1
+        breaks = (np.flatnonzero(np.diff(local) != 1) + 1).tolist()
+        offsets = (block.offset + local * row_bytes).tolist()
         for a, b in zip([0, *breaks], [*breaks, len(local)], strict=True):
-            run = Block(0, int(b - a), block.offset + int(local[a]) * row_bytes)
-            read_block(dataset, run, got[first + a : first + b])
+            space = got[first + a : first + b]
+            if os.preadv(handle, [space.data.cast("B")], offsets[a]) != space.nbytes:
+                raise IndexFileError(f"{dataset.file.filename}: the file ends inside its rows")
     return got
 
 
