@@ -415,6 +415,10 @@ def main() -> None:
     parser.add_argument("--dask-files", type=int, default=100_000)
     parser.add_argument("--workers", type=int, default=4)
     parser.add_argument("--keep", action="store_true")
+    parser.add_argument(
+        "--writer-index", type=Path, default=None,
+        help="measure the writer and Dask on this index instead of the largest mixed one",
+    )  # fmt: skip
     args = parser.parse_args()
     if args.sizes and args.real is None:
         parser.error("mixed rows (--sizes) need --real INDEX")
@@ -429,7 +433,9 @@ def main() -> None:
         + " ".join(map(str, args.sizes))
         + " --random-sizes "
         + " ".join(map(str, args.random_sizes))
-        + f" --dask-files {args.dask_files} --workers {args.workers}`",
+        + f" --dask-files {args.dask_files} --workers {args.workers}"
+        + ("" if args.writer_index is None else " --writer-index INDEX")
+        + "`",
         "",
         f"Machine: {os.cpu_count()} cores, Python {platform.python_version()}, numpy "
         f"{np.__version__}; rows of {WIDTH} float32 (`cfhks`); real rows: "
@@ -473,10 +479,16 @@ def main() -> None:
                     f"{statistics.median(commits['total']):.3f} | {max(commits['total']):.3f} | "
                     f"{commits['peak_mb']:.0f} |"
                 )
-            if kind == "mixed" and n == max(sizes):
+            if kind == "mixed" and n == max(sizes) and args.writer_index is None:
                 tail += writer_measures(path, n, args.dask_files, args.workers)
             if not args.keep:
                 shutil.rmtree(path, ignore_errors=True)
+    if args.writer_index is not None:
+        from cfsig.index import IndexReader
+
+        with IndexReader(args.writer_index) as reader:
+            rows = len(reader)
+        tail += writer_measures(args.writer_index, rows, args.dask_files, args.workers)
     if real is not None:
         check = rankings_check(args.real)
         print(json.dumps(check), flush=True)
