@@ -1,22 +1,33 @@
 """The index at scale: commit time against index size, query time and memory, a Dask run.
 
-Usage: python benchmarks/index_scale.py [--sizes 10000 100000 1000000 10000000] [--dir DIR]
-       [--dask-tasks 20000] [--workers 4] [--keep]
+Usage: python benchmarks/index_scale.py --real INDEX [--sizes 1000000 10000000]
+       [--random-sizes 1000000] [--dir DIR] [--dask-files 100000] [--workers 4] [--keep]
 
-Builds synthetic indexes of random `cfhks`-length rows through `IndexWriter` (commits of
-1,000,000 rows, no merging while building) in DIR (default: a temporary folder under /work),
-then measures, each in a fresh process:
+Builds synthetic indexes through `IndexWriter` (commits of 1,000,000 rows, no merging while
+building) in DIR (default: a temporary folder under /work), of two kinds of `cfhks`-length rows:
 
-- commit: open a writer, add 200 new rows, commit (median and max of 5, and the seconds to open);
-- a run of 100 such commits in one process, merges included (median, 95th percentile, max);
-- query: open, one query, names of the top 20 (median of 3 after one warm-up) and peak memory;
-- writer alone: rows per second added and committed in commits of 200 into the largest index;
-- Dask: a local cluster (one thread per worker) computing a stand-in signature per task through
-  `cfsig.batch.compute_many`, its outcomes added to the largest index and committed every 200,
-  as `cfsig index --scheduler` does: signatures per second, and the writer's busy fraction.
+- "mixed" (``--sizes``): each row a random convex combination of two rows of a real index
+  (``--real``, e.g. `cfsig index` over SHREC07) plus Gaussian noise of `NOISE` times each
+  coordinate's standard deviation over the real rows: rows that look like real signatures;
+- "random" (``--random-sizes``): uniform random values, the worst case of any pruning.
 
-Prints Markdown for docs/index-scale.md. Needs about 15 GB of disk per 10M rows; the indexes
-are deleted afterwards unless --keep.
+Then measures, each in a fresh process:
+
+- commit (mixed only): open a writer, add 200 new rows, commit (median and max of 5, and the
+  seconds to open);
+- query: open, one query (a new row of the same kind), names of the top 20, median of 3 after
+  one warm-up, peak memory, and the rows whose exact distance was computed; then the same with
+  pruning off (the full scan), in another process;
+- on the largest mixed index: a run of 100 commits (median, 95th percentile, max); the writer
+  alone (rows per second added and committed every 200); Dask: a local cluster (one thread per
+  worker) computing a stand-in signature per file through `cfsig.batch.compute_many`, its
+  outcomes added to the index and committed every 200, as `cfsig index --scheduler` does
+  (signatures per second, the writer's busy fraction), with batches as `compute_many` makes them
+  and with one file per task (the batch size forced to 1) for comparison;
+- in memory: the sketch group size (rows left to compute exactly, and the sketch scan's time).
+
+Prints Markdown for docs/index-scale.md. An index already in DIR (from --keep) is reused; each is
+deleted once measured unless --keep.
 """
 
 from __future__ import annotations
@@ -44,8 +55,34 @@ from cfsig.params import Params, signature_length  # noqa: E402
 PARAMS = Params(descriptor="cfhks")
 WIDTH = signature_length(PARAMS)
 BUILD_ROWS = 1_000_000
+PIECE_ROWS = 100_000  # synthetic rows generated at a time
 COMMIT = 200
 COMMITS = 100  # in the run of consecutive commits
+BATCH_STUDY = (100, 5000)  # largest batches measured besides compute_many's own
+NOISE = 0.02  # noise of a mixed row, in standard deviations of each coordinate over real rows
+K = 20
+
+
+def real_rows(index: str | None) -> np.ndarray | None:
+    """The signatures of a real index, or None for random rows."""
+    if index is None:
+        return None
+    from cfsig.index import IndexReader
+
+    with IndexReader(index) as reader:
+        if reader.params != PARAMS:
+            raise SystemExit(f"{index}: not an index of {PARAMS.to_json()}")
+        return reader.signatures[:]
+
+
+def synthetic_rows(rng: np.random.Generator, n: int, real: np.ndarray | None) -> np.ndarray:
+    """n rows: mixtures of two real rows plus noise, or uniform random values without ``real``."""
+    if real is None:
+        return rng.random((n, WIDTH), dtype=np.float32)
+    i, j = rng.integers(0, len(real), (2, n))
+    t = rng.random((n, 1), dtype=np.float32)
+    noise = rng.standard_normal((n, WIDTH), dtype=np.float32) * (NOISE * real.std(axis=0))
+    return (t * real[i] + (1 - t) * real[j] + noise).astype(np.float32)
 
 
 def fake_signature(i: int, rng: np.random.Generator | None = None):
@@ -66,19 +103,20 @@ def entry(i: int) -> Entry:
     return Entry(f"{label}/{i}.off", label, f"/data/{label}/{i}.off")
 
 
-def build(path: Path, n: int) -> float:
-    """Write n random rows in commits of BUILD_ROWS; return the seconds taken."""
+def build(path: Path, n: int, real: np.ndarray | None) -> float:
+    """Write n synthetic rows in commits of BUILD_ROWS; return the seconds taken."""
     from cfsig.signature import Signature
 
     rng = np.random.default_rng(0)
     phi = np.zeros(1)
     start = time.perf_counter()
     with IndexWriter(path, PARAMS, merge=False) as writer:
-        for first in range(0, n, BUILD_ROWS):
-            rows = rng.random((min(BUILD_ROWS, n - first), WIDTH), dtype=np.float32)
+        for first in range(0, n, PIECE_ROWS):
+            rows = synthetic_rows(rng, min(PIECE_ROWS, n - first), real)
             for i, vector in enumerate(rows, first):
                 writer.add(entry(i), Signature(vector, phi, 1, 1, 1, 0.0, (), "clean", 0.0, ""))
-            writer.commit()
+            if writer.pending >= BUILD_ROWS or first + PIECE_ROWS >= n:
+                writer.commit()
     seconds = time.perf_counter() - start
     os.sync()  # so that writing back the build does not slow the fsyncs of the commits timed
     return seconds
@@ -142,21 +180,37 @@ out = {{'times': times, 'wall': time.perf_counter() - t0, 'segments': segments}}
     return in_child(code)
 
 
-def query_times(path: Path) -> dict:
-    """Open + one query + names of the top 20, median of 3 after a warm-up, in a fresh process."""
+def query_times(path: Path, real: str | None, pruned: bool) -> dict:
+    """Open + one query + names of the top 20, median of 3 after a warm-up, in a fresh process.
+
+    Also counts the rows whose exact distance the query computed; ``pruned`` False forces the
+    full scan.
+    """
     code = f"""
 import numpy as np
+import cfsig.nearest
 from cfsig.index import IndexReader
 from cfsig.nearest import search
-query = np.random.default_rng(5).random((1, {WIDTH}), dtype=np.float32)
+from benchmarks.index_scale import real_rows, synthetic_rows
+real = real_rows({real!r})
+query = synthetic_rows(np.random.default_rng(5), 1, real)
+if not {pruned}:
+    cfsig.nearest.PRUNE_MIN_ROWS = 10**15
+exact = []
+real_exact = cfsig.nearest._Pruned._exact
+def counted(self, j, query, rows, *args):
+    exact.append(len(rows))
+    return real_exact(self, j, query, rows, *args)
+cfsig.nearest._Pruned._exact = counted
 def once():
+    exact.clear()
     t = time.perf_counter()
     with IndexReader({str(path)!r}) as r:
-        hits = search(r, query, 20)[0]
+        hits = search(r, query, {K})[0]
     return time.perf_counter() - t, len(r)
 once()
 runs = [once() for _ in range(3)]
-out = {{'times': [t for t, _ in runs], 'rows': runs[0][1]}}
+out = {{'times': [t for t, _ in runs], 'rows': runs[0][1], 'exact': sum(exact)}}
 """
     return in_child(code)
 
@@ -179,16 +233,21 @@ out = {{'seconds': time.perf_counter() - t}}
     return rows / in_child(code)["seconds"]
 
 
-def dask_run(path: Path, first: int, tasks: int, workers: int) -> dict:
-    """The stand-in computation on a local Dask cluster, its outcomes written to the index."""
+def dask_run(path: Path, first: int, files: int, workers: int, batch: int) -> dict:
+    """The stand-in computation on a local Dask cluster, its outcomes written to the index.
+
+    ``batch`` is the largest number of files per task (1: a task per file, as before batches).
+    """
     from distributed import LocalCluster
 
+    import cfsig.batch
     from cfsig.batch import compute_many
 
+    cfsig.batch._MAX_BATCH = batch
     with LocalCluster(
         n_workers=workers, threads_per_worker=1, dashboard_address=None, host="127.0.0.1"
     ) as cluster:
-        paths = [Path(f"/data/dask/{first + i}.off") for i in range(tasks)]
+        paths = [Path(f"/data/dask/{first + i}.off") for i in range(files)]
         busy, count = 0.0, 0
         start = time.perf_counter()
         with IndexWriter(path, PARAMS) as writer:
@@ -203,6 +262,43 @@ def dask_run(path: Path, first: int, tasks: int, workers: int) -> dict:
                 busy += time.perf_counter() - t
         wall = time.perf_counter() - start
     return {"rate": count / wall, "busy": busy / wall, "count": count, "wall": wall}
+
+
+def group_study(real: np.ndarray, rows: int = 1_000_000, queries: int = 5) -> list[dict]:
+    """Sketch group sizes on ``rows`` mixed rows in memory, one thread: for each, the mean
+    number of rows whose bound does not exceed the 20th distance (those a search computes
+    exactly, at least), and the seconds to scan the sketches with one query (best of 3)."""
+    from cfsig.l1 import choose_kernel
+    from cfsig.sketch import group_sums
+
+    rng = np.random.default_rng(11)
+    data = np.concatenate(
+        [synthetic_rows(rng, PIECE_ROWS, real) for _ in range(rows // PIECE_ROWS)]
+    )
+    probe = synthetic_rows(rng, queries, real)
+    kernel = choose_kernel(rows)
+    dist = np.empty((queries, rows), np.float32)
+    kernel(probe, data, dist)
+    kth = np.sort(dist, axis=1)[:, K - 1]
+    study = []
+    for size in (8, 16, 32, 64):
+        groups = np.arange(0, WIDTH, size)
+        sketches = np.concatenate(
+            [group_sums(data[s : s + PIECE_ROWS], groups).astype(np.float32)
+             for s in range(0, rows, PIECE_ROWS)]
+        )  # fmt: skip
+        probes = group_sums(probe, groups).astype(np.float32)
+        bounds = np.empty((queries, rows), np.float32)
+        kernel(probes, sketches, bounds)
+        left = float((bounds <= kth[:, None]).sum(axis=1).mean())
+        best = float("inf")
+        out = np.empty((1, rows), np.float32)
+        for _ in range(3):
+            t = time.perf_counter()
+            kernel(probes[:1], sketches, out)
+            best = min(best, time.perf_counter() - t)
+        study.append({"group": size, "entries": len(groups), "left": left, "scan": best})
+    return study
 
 
 def sad_uint8(block: np.ndarray, query: np.ndarray) -> np.ndarray:
@@ -275,84 +371,199 @@ def storage_scan(rows: int = 1_000_000) -> dict[str, float]:
     return seconds
 
 
+def rankings_check(index: str) -> dict:
+    """Every row of a real index as a query, its 2(C - 1) + 1 nearest (C its class size) pruned
+    (forced, however few the rows) and by the full scan: whether rows and distances are equal,
+    NN, FT and ST from each ranking (the query itself left out), and the rows each computed."""
+    import cfsig.nearest
+    from cfsig.index import IndexReader
+    from cfsig.nearest import nearest
+
+    settings = {"PRUNE_MIN_ROWS": 0, "_SCAN_RATIO": 0, "_FIRST": 1}
+    saved = {key: getattr(cfsig.nearest, key) for key in settings}
+    with IndexReader(index) as reader:
+        labels = np.array(reader.column("labels"))
+        sizes = {c: int((labels == c).sum()) for c in set(labels)}
+        k = 2 * (max(sizes.values()) - 1) + 1
+        queries = reader.signatures[:]
+        full = nearest(reader, queries, k)
+        vars(cfsig.nearest).update(settings)
+        try:
+            pruned = nearest(reader, queries, k)
+        finally:
+            vars(cfsig.nearest).update(saved)
+    out: dict = {"identical": bool(np.array_equal(full[0], pruned[0]))}
+    out["identical"] &= bool(np.array_equal(full[1], pruned[1]))
+    for route, (rows, _) in (("full", full), ("pruned", pruned)):
+        nn, ft, st = [], [], []
+        for q, ranked in enumerate(rows):
+            others = labels[ranked[ranked != q]]
+            same, c = others == labels[q], sizes[labels[q]] - 1
+            nn.append(same[0])
+            ft.append(same[:c].sum() / c)
+            st.append(same[: 2 * c].sum() / c)
+        out[route] = {"NN": float(np.mean(nn)), "FT": float(np.mean(ft)), "ST": float(np.mean(st))}
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--sizes", type=int, nargs="+", default=[10_000, 100_000, 1_000_000, 10_000_000]
-    )
+    parser.add_argument("--real", default=None, help="an index of real cfhks signatures")
+    parser.add_argument("--sizes", type=int, nargs="*", default=[1_000_000, 10_000_000])
+    parser.add_argument("--random-sizes", type=int, nargs="*", default=[1_000_000])
     parser.add_argument("--dir", type=Path, default=None)
-    parser.add_argument("--dask-tasks", type=int, default=20_000)
+    parser.add_argument("--dask-files", type=int, default=100_000)
     parser.add_argument("--workers", type=int, default=4)
     parser.add_argument("--keep", action="store_true")
+    parser.add_argument(
+        "--writer-index", type=Path, default=None,
+        help="measure the writer and Dask on this index instead of the largest mixed one",
+    )  # fmt: skip
     args = parser.parse_args()
-    folder = Path(tempfile.mkdtemp(prefix="index-scale-", dir=args.dir or "/work"))
+    if args.sizes and args.real is None:
+        parser.error("mixed rows (--sizes) need --real INDEX")
+    if args.dir is not None:
+        args.dir.mkdir(parents=True, exist_ok=True)
+    folder = args.dir or Path(tempfile.mkdtemp(prefix="index-scale-", dir="/work"))
+    real = real_rows(args.real)
     started = time.time()
     load = os.getloadavg()[0]
     lines = [
-        "Command: `python benchmarks/index_scale.py "
-        + " ".join(f"--sizes {' '.join(map(str, args.sizes))}".split())
-        + f" --dask-tasks {args.dask_tasks} --workers {args.workers}`",
+        "Command: `python benchmarks/index_scale.py --real INDEX --sizes "
+        + " ".join(map(str, args.sizes))
+        + " --random-sizes "
+        + " ".join(map(str, args.random_sizes))
+        + f" --dask-files {args.dask_files} --workers {args.workers}"
+        + ("" if args.writer_index is None else " --writer-index INDEX")
+        + "`",
         "",
         f"Machine: {os.cpu_count()} cores, Python {platform.python_version()}, numpy "
-        f"{np.__version__}; rows of {WIDTH} float32 (`cfhks`); load average {load:.1f} at the "
-        "start.",
+        f"{np.__version__}; rows of {WIDTH} float32 (`cfhks`); real rows: "
+        f"{0 if real is None else len(real)}; load average {load:.1f} at the start.",
         "",
-        "| rows | build s | index size | open writer s (median) | open + add 200 + commit s "
-        "(median of 5) | (max) | writer peak MB | query s (median of 3) | query peak MB |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| rows | kind | build s | index size | query s (median of 3) | rows computed exactly "
+        "| query peak MB | full scan s (median of 3) | full scan peak MB | full scan / query |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    results = {}
-    try:
-        for n in args.sizes:
-            path = folder / f"i{n}"
-            built = build(path, n)
-            size = sum(f.stat().st_size for f in path.iterdir())
-            commits = commit_times(path, 10**9, 5)
-            query = query_times(path)
-            results[n] = {"commits": commits, "query": query, "build": built}
-            print(n, json.dumps(results[n]), flush=True)
-            lines.append(
-                f"| {n:,} | {built:.0f} | {size / 1e9:.2f} GB | "
-                f"{statistics.median(commits['open']):.3f} | "
-                f"{statistics.median(commits['total']):.3f} | {max(commits['total']):.3f} | "
-                f"{commits['peak_mb']:.0f} | {statistics.median(query['times']):.3f} | "
-                f"{query['peak_mb']:.0f} |"
+    commit_lines = [
+        "",
+        "| rows | open writer s (median) | open + add 200 + commit s (median of 5) | (max) "
+        "| writer peak MB |",
+        "|---|---|---|---|---|",
+    ]
+    tail: list[str] = []
+    for kind, sizes in (("mixed", args.sizes), ("random", args.random_sizes)):
+        source = args.real if kind == "mixed" else None
+        for n in sizes:
+            path = folder / f"{kind}-{n}"
+            built = (
+                None
+                if (path / "manifest.h5").exists()
+                else build(path, n, real if source else None)
             )
-        largest = folder / f"i{max(args.sizes)}"
-        run = commit_run(largest, 2 * 10**9, COMMITS)
-        times = sorted(run["times"])
-        alone = writer_alone(largest, 3 * 10**9, 20_000)
-        dask = dask_run(largest, 4 * 10**9, args.dask_tasks, args.workers)
-        scan = storage_scan()
-        print(json.dumps({"run": run, "alone": alone, "dask": dask, "scan": scan}), flush=True)
-        lines += [
+            size = sum(f.stat().st_size for f in path.iterdir())
+            query = query_times(path, source, True)
+            full = query_times(path, source, False)
+            print(n, kind, built, json.dumps({"query": query, "full": full}), flush=True)
+            fast, slow = statistics.median(query["times"]), statistics.median(full["times"])
+            lines.append(
+                f"| {n:,} | {kind} | {'reused' if built is None else f'{built:.0f}'} | "
+                f"{size / 1e9:.2f} GB | {fast:.3f} | {query['exact']:,} | {query['peak_mb']:.0f} "
+                f"| {slow:.3f} | {full['peak_mb']:.0f} | {slow / fast:.1f} |"
+            )
+            if kind == "mixed":
+                commits = commit_times(path, 10**9, 5)
+                print(json.dumps(commits), flush=True)
+                commit_lines.append(
+                    f"| {n:,} | {statistics.median(commits['open']):.3f} | "
+                    f"{statistics.median(commits['total']):.3f} | {max(commits['total']):.3f} | "
+                    f"{commits['peak_mb']:.0f} |"
+                )
+            if kind == "mixed" and n == max(sizes) and args.writer_index is None:
+                tail += writer_measures(path, n, args.dask_files, args.workers)
+            if not args.keep:
+                shutil.rmtree(path, ignore_errors=True)
+    if args.writer_index is not None:
+        from cfsig.index import IndexReader
+
+        with IndexReader(args.writer_index) as reader:
+            rows = len(reader)
+        tail += writer_measures(args.writer_index, rows, args.dask_files, args.workers)
+    if real is not None:
+        check = rankings_check(args.real)
+        print(json.dumps(check), flush=True)
+        tail += [
             "",
-            f"{COMMITS} consecutive commits of 200 rows into the {max(args.sizes):,}-row index, "
-            f"one writer (automatic merges included): median {statistics.median(times):.3f} s, "
-            f"95th percentile {times[int(0.95 * len(times))]:.3f} s, max {times[-1]:.3f} s; "
-            f"{run['segments']} segments at the end.",
-            "",
-            f"Writer alone, add + commit every 200 rows into the {max(args.sizes):,}-row index: "
-            f"{alone:,.0f} rows per second.",
-            "",
-            f"Dask, local cluster of {args.workers} one-thread workers, stand-in computation, "
-            f"{dask['count']:,} tasks through `compute_many`, written to the "
-            f"{max(args.sizes):,}-row index with a commit every 200: {dask['rate']:,.0f} "
-            f"signatures per second; the writer was busy {100 * dask['busy']:.0f}% of the "
-            f"time ({dask['wall']:.1f} s in all).",
-            "",
-            "One query over 1,000,000 rows in memory, one thread, best of 3 (the L1 kernel "
-            "takes float32: compact rows are decoded piece by piece first): "
-            + ", ".join(f"{k} {v:.3f} s" for k, v in scan.items())
+            "Every row of the real index as a query, its nearest by the pruned search (forced) "
+            f"and by the full scan: rows and distances identical: {check['identical']}; "
+            + "; ".join(
+                f"{route}: " + ", ".join(f"{m} {v:.3f}" for m, v in check[route].items())
+                for route in ("full", "pruned")
+            )
             + ".",
-            "",
-            f"The run took {time.time() - started:.0f} s; load average {os.getloadavg()[0]:.1f} "
-            "at the end.",
         ]
-    finally:
-        if not args.keep:
-            shutil.rmtree(folder, ignore_errors=True)
-    print("\n".join(lines))
+        study = group_study(real)
+        print(json.dumps(study), flush=True)
+        tail += [
+            "",
+            "Sketch group sizes, 1,000,000 mixed rows in memory, 5 queries, one thread: "
+            + "; ".join(
+                f"{g['group']} coordinates ({g['entries']} entries): {g['left']:,.0f} rows with "
+                f"a bound at most the 20th distance, sketch scan {g['scan']:.4f} s"
+                for g in study
+            )
+            + ".",
+        ]
+    scan = storage_scan()
+    print(json.dumps(scan), flush=True)
+    tail += [
+        "",
+        "One query over 1,000,000 rows in memory, one thread, best of 3 (the L1 kernel "
+        "takes float32: compact rows are decoded piece by piece first): "
+        + ", ".join(f"{k} {v:.3f} s" for k, v in scan.items())
+        + ".",
+        "",
+        f"The run took {time.time() - started:.0f} s; load average {os.getloadavg()[0]:.1f} "
+        "at the end.",
+    ]
+    print("\n".join(lines + commit_lines + tail))
+
+
+def writer_measures(path: Path, n: int, files: int, workers: int) -> list[str]:
+    """Consecutive commits, the writer alone and the Dask runs on the largest mixed index."""
+    run = commit_run(path, 2 * 10**9, COMMITS)
+    times = sorted(run["times"])
+    alone = writer_alone(path, 3 * 10**9, 20_000)
+    from cfsig.batch import _MAX_BATCH as default  # before dask_run changes it
+
+    dask = dask_run(path, 4 * 10**9, files, workers, default)
+    single = dask_run(path, 5 * 10**9, min(files, 5_000), workers, 1)
+    others = {b: dask_run(path, (6 + i) * 10**9, files // 3, workers, b)
+              for i, b in enumerate(BATCH_STUDY)}  # fmt: skip
+    print(json.dumps({"run": run, "alone": alone, "dask": dask, "single": single,
+                      "others": others}), flush=True)  # fmt: skip
+    return [
+        "",
+        f"{COMMITS} consecutive commits of 200 rows into the {n:,}-row index, one writer "
+        f"(automatic merges included): median {statistics.median(times):.3f} s, 95th percentile "
+        f"{times[int(0.95 * len(times))]:.3f} s, max {times[-1]:.3f} s; {run['segments']} "
+        "segments at the end.",
+        "",
+        f"Writer alone, add + commit every 200 rows into the {n:,}-row index: {alone:,.0f} rows "
+        "per second.",
+        "",
+        f"Dask, local cluster of {workers} one-thread workers, stand-in computation, written to "
+        f"the {n:,}-row index with a commit every 200, through `compute_many`: batched, "
+        f"{dask['count']:,} files in {dask['wall']:.1f} s, **{dask['rate']:,.0f} signatures per "
+        f"second**, the writer busy {100 * dask['busy']:.0f}% of the time; one file per task, "
+        f"{single['count']:,} files in {single['wall']:.1f} s, {single['rate']:,.0f} per second, "
+        f"the writer busy {100 * single['busy']:.0f}%. At most "
+        + ", ".join(
+            f"{b:,} files per task ({r['count']:,} files): {r['rate']:,.0f} per second"
+            for b, r in others.items()
+        )
+        + f" (`compute_many`: at most {default:,}).",
+    ]
 
 
 if __name__ == "__main__":

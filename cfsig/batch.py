@@ -21,6 +21,8 @@ from .signature import Signature, signature_file
 
 _CONNECT_TIMEOUT = "20s"
 _COMMIT_SECONDS = 30.0
+_TASK_SECONDS = 0.5  # work per Dask task that batches aim at: docs/index-scale.md
+_MAX_BATCH = 1000  # files per Dask task at most
 Compute = Callable[[Path, Params, str], Signature]
 
 
@@ -62,8 +64,10 @@ def compute_many(
     grow with the number of files. Workers run with one BLAS/OpenMP thread each. Locally, a
     worker that dies (a crash in native code, the out-of-memory killer) fails only its own
     file: after a pool breaks, the files that were in flight are retried one at a time. On a
-    Dask cluster, a task whose worker dies is retried by Dask on another worker a few times,
-    then fails alone.
+    Dask cluster, files go in batches, as many per task as fit in about half a second of work
+    (one per task while the first results are awaited, at most 1,000): Dask's cost per task is
+    paid once per batch. A task whose worker dies is retried by Dask on another worker a few
+    times; if it still fails, its files are sent again one per task, and the bad one fails alone.
 
     Parameters
     ----------
@@ -251,7 +255,14 @@ def successes(
 def _compute_on_cluster(
     paths: Iterable[Path], params: Params, solver: str, address: str, compute: Compute
 ) -> Iterator[Outcome]:
-    """`compute_many` on the workers of a Dask cluster, a sliding window of tasks in flight."""
+    """`compute_many` on the workers of a Dask cluster, a sliding window of tasks in flight.
+
+    Each task computes a batch of files, as many as the workers' reported seconds per file fit
+    in `_TASK_SECONDS` (at most `_MAX_BATCH`, one until a first batch is back): Dask's cost per
+    task is then paid once per batch, not per file (docs/index-scale.md). A batch whose task
+    fails as a whole (its worker died, and Dask's retries too) is sent again file by file, so
+    that a bad file fails alone, as it would in a task of its own.
+    """
     try:
         from distributed import Client, as_completed
     except ImportError:
@@ -266,26 +277,61 @@ def _compute_on_cluster(
         window = 2 * max(1, sum(client.nthreads().values()))
         pending = iter(paths)
         running: dict = {}
+        alone: list[Path] = []  # the files of batches that failed as a whole, to send one by one
+        seconds, done = 0.0, 0  # work reported by the workers, and the files it took
 
         def submit(count: int) -> list:
-            """Send up to ``count`` more files to the cluster; return their futures."""
+            """Send up to ``count`` more batches to the cluster; return their futures."""
             futures = []
-            for path in islice(pending, count):
-                absolute = str(Path(path).resolve())
-                futures.append(client.submit(_work, absolute, params, solver, compute, pure=False))
-                running[futures[-1]] = path
+            for _ in range(count):
+                size = max(1, min(_MAX_BATCH, int(_TASK_SECONDS * done / seconds))) if done else 1
+                batch = [alone.pop(0)] if alone else list(islice(pending, size))
+                if not batch:
+                    break
+                absolute = [str(Path(path).resolve()) for path in batch]
+                futures.append(
+                    client.submit(_work_batch, absolute, params, solver, compute, pure=False)
+                )
+                running[futures[-1]] = batch
             return futures
 
         tasks = as_completed(submit(window), loop=client.loop)
         for future in tasks:
-            path = running.pop(future)
+            batch = running.pop(future)
             try:
-                outcome = future.result()
-                yield Outcome(path, outcome.signature, outcome.error)
-            except Exception as exc:  # Dask re-raises whatever failed remotely, or KilledWorker
-                yield Outcome(path, None, f"{path}: failed on the cluster: {exc}")
+                results, took = future.result()
+            except Exception as exc:  # Dask re-raises what failed remotely, or KilledWorker
+                if len(batch) == 1:
+                    yield Outcome(batch[0], None, f"{batch[0]}: failed on the cluster: {exc}")
+                else:
+                    alone.extend(batch)
+                results, took = [], 0.0
+            seconds, done = seconds + took, done + len(results)
+            for path, result in zip(batch, results, strict=False):
+                if isinstance(result, str):
+                    yield Outcome(path, None, f"{path}: failed on the cluster: {result}")
+                else:
+                    yield Outcome(path, result.signature, result.error)
             future.release()
-            tasks.update(submit(1))
+            tasks.update(submit(1 + (len(batch) > 1 and not results)))
+
+
+def _work_batch(
+    paths: list[str], params: Params, solver: str, compute: Compute
+) -> tuple[list[Outcome | str], float]:
+    """Compute a batch of files on a Dask worker, each failure costing only its own file.
+
+    Returns the outcome of each file, or the text of the exception it raised, and the seconds
+    the batch took.
+    """
+    start = time.perf_counter()
+    results: list[Outcome | str] = []
+    for path in paths:
+        try:
+            results.append(_work(Path(path), params, solver, compute))
+        except Exception as exc:  # what a task of its own would have raised to the client
+            results.append(str(exc))
+    return results, time.perf_counter() - start
 
 
 def _work(path: Path, params: Params, solver: str, compute: Compute) -> Outcome:

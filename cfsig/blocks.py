@@ -22,6 +22,7 @@ import numpy as np
 from .errors import IndexFileError
 
 _FLOAT32 = np.dtype(np.float32)
+_DENSE = 4  # `read_rows` reads a whole block when it wants a quarter of its rows or more
 
 
 @dataclass(frozen=True)
@@ -101,6 +102,54 @@ def read_block(dataset: h5py.Dataset, block: Block, buffer: np.ndarray) -> np.nd
     if os.preadv(handle, [out.data.cast("B")], block.offset) != out.nbytes:
         raise IndexFileError(f"{dataset.file.filename}: the file ends inside the signatures")
     return out
+
+
+def read_rows(
+    dataset: h5py.Dataset, blocks: list[Block], rows: np.ndarray, out: np.ndarray
+) -> np.ndarray:
+    """Some rows of a dataset, read by runs of adjacent rows, or by whole blocks where dense.
+
+    Parameters
+    ----------
+    dataset : h5py.Dataset
+        A 2-D float32 dataset of shape (N, bins), still open.
+    blocks : list of Block
+        From `plan_blocks` on it.
+    rows : (m,) int64
+        Distinct row numbers, ascending.
+    out : (m', bins) float32, C-contiguous
+        Space for at least m rows.
+
+    Returns
+    -------
+    rows : (m, bins) float32
+        A view of ``out``, in the order of ``rows``.
+
+    Raises
+    ------
+    IndexFileError
+        The file ends before a row does.
+    """
+    got = out[: len(rows)]
+    starts = np.array([b.start for b in blocks], np.int64)
+    which = np.searchsorted(starts, rows, side="right") - 1
+    row_bytes = dataset.shape[1] * _FLOAT32.itemsize
+    handle = dataset.file.id.get_vfd_handle() if any(b.offset is not None for b in blocks) else -1
+    bounds = np.flatnonzero(np.diff(which, prepend=-1, append=len(blocks))).tolist()
+    for first, last in zip(bounds[:-1], bounds[1:], strict=True):
+        block = blocks[which[first]]
+        local = rows[first:last] - block.start
+        if block.offset is None or _DENSE * len(local) >= block.stop - block.start:
+            whole = np.empty((block.stop - block.start, dataset.shape[1]), np.float32)
+            got[first:last] = read_block(dataset, block, whole)[local]
+            continue
+        breaks = (np.flatnonzero(np.diff(local) != 1) + 1).tolist()
+        offsets = (block.offset + local * row_bytes).tolist()
+        for a, b in zip([0, *breaks], [*breaks, len(local)], strict=True):
+            space = got[first + a : first + b]
+            if os.preadv(handle, [space.data.cast("B")], offsets[a]) != space.nbytes:
+                raise IndexFileError(f"{dataset.file.filename}: the file ends inside its rows")
+    return got
 
 
 def _plain(dataset: h5py.Dataset) -> bool:

@@ -41,6 +41,7 @@ from .segments import (
     COLUMNS,
     META,
     SEGMENT_FORMAT,
+    SKETCH_EXTRA,
     STRING,
     TEXT,
     Piece,
@@ -48,6 +49,7 @@ from .segments import (
     scan_segment,
     write_segment,
 )
+from .sketch import Sketch
 
 if TYPE_CHECKING:  # importing the signature code would load scipy on the query path
     from .signature import Signature
@@ -137,11 +139,15 @@ class SegmentView:
         Number of rows, superseded ones included, in the segments before this one.
     dead : (d,) int64
         Sorted rows of this segment superseded by later ones.
+    sketch : Sketch or None
+        Its rows' sketches, the lower bounds a search prunes by; None for a segment written
+        before sketches existed, or a format-1 file, which a search scans in full.
     """
 
     signatures: h5py.Dataset
     start: int
     dead: np.ndarray
+    sketch: Sketch | None = None
 
 
 class IndexReader:
@@ -199,7 +205,8 @@ class IndexReader:
             dead = _dead_rows(manifest.segments, files, self.path)
             views, start = [], 0
             for info, f in zip(manifest.segments, files, strict=True):
-                views.append(SegmentView(f["signatures"], start, dead[info.id]))
+                sketch = _read_sketch(f, self.path / info.file)
+                views.append(SegmentView(f["signatures"], start, dead[info.id], sketch))
                 start += info.rows
             return manifest.params, views
         raise AssertionError("unreachable")  # pragma: no cover
@@ -879,6 +886,26 @@ def _open_segment(folder: Path, info: SegmentInfo) -> h5py.File:
         f.close()
         raise IndexFileError(f"{folder}: segment {info.file} does not match the manifest")
     return f
+
+
+def _read_sketch(f: h5py.File, path: Path) -> Sketch | None:
+    """A segment's sketches and what goes with them, or None if it has none; checks shapes."""
+    if "sketch" not in f:
+        return None
+    try:
+        groups, center, error = (f[k][:] for k in SKETCH_EXTRA)
+    except KeyError:
+        raise IndexFileError(f"{path}: its sketches are incomplete") from None
+    rows, width = f["signatures"].shape
+    ok = (
+        f["sketch"].shape == (rows, len(groups)) == (rows, len(center))
+        and error.shape == (1,)
+        and (not len(groups) or (groups[0] == 0 and (np.diff(groups) > 0).all()))
+        and (not len(groups) or groups[-1] < width)
+    )
+    if not ok:
+        raise IndexFileError(f"{path}: its sketches do not match its signatures")
+    return Sketch(f["sketch"], groups.astype(np.int64), center.astype(np.float64), float(error[0]))
 
 
 def _open_h5(path: Path, index: Path | None = None) -> h5py.File:

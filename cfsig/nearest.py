@@ -6,20 +6,28 @@ Every descriptor's vector is built so that its L1 distance is the descriptor's d
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 
-from .blocks import Block, plan_blocks, read_block
+from .blocks import Block, plan_blocks, read_block, read_rows
 from .index import Entry, IndexReader, SegmentView
-from .l1 import choose_kernel
+from .l1 import Kernel, choose_kernel
+from .sketch import adjust_bounds, query_sketches, threshold
 
 _BLOCK_ROWS = 16384  # rows per block of a dataset that is not chunked
 _OUT_CELLS = 1 << 20  # distances computed per kernel call (4 MB): bounds memory for many queries
+PRUNE_MIN_ROWS = 50_000  # rows with sketches from which a search prunes: docs/index-scale.md
+_BOUND_CELLS = 1 << 25  # bounds held at once (128 MB): the queries of one scan of the sketches
+_FIRST = 1024  # rows of smallest bounds evaluated first per query (at least 4 k)
+_SAMPLE = 65536  # bounds sampled to find the cutoff of those rows
+_SCAN_RATIO = 4  # a full scan when the candidates are a quarter of the rows or more
 
 
 @dataclass(frozen=True)
@@ -65,10 +73,17 @@ def l1_distances(queries: np.ndarray, signatures: np.ndarray) -> np.ndarray:
 def nearest(
     reader: IndexReader, queries: np.ndarray, k: int, columns: slice | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The k nearest indexed signatures of each query, streaming the index in blocks.
+    """The k nearest indexed signatures of each query, exactly, pruning by sketches.
 
-    All queries share one pass over the segments, made by one thread per core; memory stays
-    bounded by a few blocks of rows whatever the index size. Superseded rows are skipped.
+    Segments with sketches (`cfsig.sketch`), once they hold `PRUNE_MIN_ROWS` rows or more, are
+    searched in two steps per query: the sketches give a lower bound of every row's distance,
+    and exact distances are computed only for rows whose bound does not exceed the k-th best
+    distance found so far; the bounds account for every rounding, so the result is the one a
+    full scan gives, row for row and bit for bit. When the bounds leave so many rows that
+    reading them costs more than a scan, and for segments without sketches, the rows are
+    scanned in full: all queries share one pass over them, by one thread per core. Memory
+    stays bounded by a few blocks of rows and `_BOUND_CELLS` bounds, whatever the index size.
+    Superseded rows are skipped. A search of some ``columns`` only scans in full.
 
     Parameters
     ----------
@@ -94,40 +109,192 @@ def nearest(
     best = _Best(len(queries), max(min(k, n), 0), reader.physical_rows)
     if best.k == 0 or len(queries) == 0:
         return best.result(reader)
-    blocks = [
-        (view, b) for view in reader.segments for b in plan_blocks(view.signatures, _BLOCK_ROWS)
-    ]
     kernel = choose_kernel(len(queries) * n)
-    todo = iter(blocks)
-    lock = threading.Lock()
-
-    def work() -> None:
-        block_rows = max(b.stop - b.start for _, b in blocks)
-        buffer = np.empty((block_rows, reader.signatures.shape[1]), np.float32)
-        group = max(1, _OUT_CELLS // block_rows)
-        out = np.empty(min(group, len(queries)) * block_rows, np.float32)
-        while (task := _next(todo, lock)) is not None:
-            view, block = task
-            rows = read_block(view.signatures, block, buffer)
-            if columns is not None:
-                rows = np.ascontiguousarray(rows[:, columns])
-            dead = view.dead[(view.dead >= block.start) & (view.dead < block.stop)] - block.start
-            live = None
-            if len(dead):
-                live = np.ones(len(rows), bool)
-                live[dead] = False
-            for q0 in range(0, len(queries), group):
-                count = len(queries[q0 : q0 + group])
-                dist = out[: count * len(rows)].reshape(count, len(rows))  # C-contiguous
-                kernel(queries[q0 : q0 + group], rows, dist)
-                with lock:
-                    best.merge(q0, view.start + block.start, dist, live)
-
-    threads = min(_threads(), len(blocks))
-    with ThreadPoolExecutor(threads) as pool:
-        for done in [pool.submit(work) for _ in range(threads)]:
-            done.result()
+    sketched = [v for v in reader.segments if v.sketch is not None and columns is None]
+    if sum(v.signatures.shape[0] for v in sketched) < PRUNE_MIN_ROWS:
+        sketched = []
+    full = [v for v in reader.segments if all(v is not s for s in sketched)]
+    if full:
+        _scan(full, queries, kernel, best, 0, columns)
+    if sketched:
+        _Pruned(reader, sketched, kernel, best).search(queries)
     return best.result(reader)
+
+
+def _scan(
+    views: list[SegmentView],
+    queries: np.ndarray,
+    kernel: Kernel,
+    best: _Best,
+    first: int,
+    columns: slice | None = None,
+) -> None:
+    """Exact distances of every live row of some segments, merged into ``best``.
+
+    ``queries`` are those of ``best`` from number ``first`` on; with ``columns``, they and the
+    distances are of those columns of the rows only.
+    """
+    blocks = [(view, b) for view in views for b in plan_blocks(view.signatures, _BLOCK_ROWS)]
+    block_rows = max((b.stop - b.start for _, b in blocks), default=1)
+    group = max(1, _OUT_CELLS // block_rows)
+
+    def work(task: tuple[SegmentView, Block], buffer: np.ndarray, lock: threading.Lock) -> None:
+        view, block = task
+        rows = read_block(view.signatures, block, buffer)
+        if columns is not None:
+            rows = np.ascontiguousarray(rows[:, columns])
+        dead = view.dead[(view.dead >= block.start) & (view.dead < block.stop)] - block.start
+        live = None
+        if len(dead):
+            live = np.ones(len(rows), bool)
+            live[dead] = False
+        for q0 in range(0, len(queries), group):
+            count = len(queries[q0 : q0 + group])
+            dist = np.empty((count, len(rows)), np.float32)
+            kernel(queries[q0 : q0 + group], rows, dist)
+            with lock:
+                best.merge(first + q0, view.start + block.start, dist, live)
+
+    width = views[0].signatures.shape[1] if views else queries.shape[1]
+    _parallel(blocks, work, (block_rows, width))
+
+
+class _Pruned:
+    """The search of some segments with sketches: bounds first, exact distances where needed."""
+
+    def __init__(
+        self, reader: IndexReader, views: list[SegmentView], kernel: Kernel, best: _Best
+    ) -> None:
+        self.views, self.kernel, self.best = views, kernel, best
+        self.width = views[0].signatures.shape[1]
+        self.plans = [plan_blocks(v.signatures, _BLOCK_ROWS) for v in views]
+        n = reader.physical_rows
+        self.excluded = np.ones(n, bool)  # superseded rows, and those of other segments
+        for v in views:
+            self.excluded[v.start : v.start + v.signatures.shape[0]] = False
+            self.excluded[v.start + v.dead] = True
+        self.live = int(n - self.excluded.sum())
+        self.starts = np.array([v.start for v in views], np.int64)
+
+    def search(self, queries: np.ndarray) -> None:
+        """Merge the nearest rows of every query into ``best``, a group of queries at a time."""
+        if max(_FIRST, 4 * self.best.k) * _SCAN_RATIO >= self.live:  # most rows would be read
+            _scan(self.views, queries, self.kernel, self.best, 0)
+            return
+        n = len(self.excluded)
+        group = max(1, _BOUND_CELLS // n)
+        sketch_kernel = choose_kernel(len(queries) * self.live)
+        for q0 in range(0, len(queries), group):
+            some = queries[q0 : q0 + group]
+            bounds = self._bounds(some, sketch_kernel)
+            cutoffs = [self._first(q0 + j, some[j], bounds[j]) for j in range(len(some))]
+            left = [self._candidates(q0 + j, bounds[j], cutoffs[j]) for j in range(len(some))]
+            if sum(len(c) for c in left) * _SCAN_RATIO >= self.live * len(some):
+                _scan(self.views, some, self.kernel, self.best, q0)  # reads less than they would
+                continue
+            for j, rows in enumerate(left):
+                self._refine(q0 + j, some[j], bounds[j], rows)
+
+    def _bounds(self, queries: np.ndarray, kernel: Kernel) -> np.ndarray:
+        """(q, physical rows) lower bounds of the float32 distances (others left unset)."""
+        bounds = np.empty((len(queries), len(self.excluded)), np.float32)
+        sketches = {id(v): query_sketches(queries, v.sketch) for v in self.views if v.sketch}
+        blocks = [
+            (v, b) for v in self.views if v.sketch for b in plan_blocks(v.sketch.rows, _BLOCK_ROWS)
+        ]
+        block_rows = max((b.stop - b.start for _, b in blocks), default=1)
+
+        def work(task: tuple[SegmentView, Block], buffer: np.ndarray, lock: threading.Lock) -> None:
+            view, block = task
+            assert view.sketch is not None
+            rows = read_block(view.sketch.rows, block, buffer)
+            at = slice(view.start + block.start, view.start + block.stop)
+            one = len(queries) == 1  # then a slice of the bounds is C-contiguous: written to
+            out = bounds[:, at] if one else np.empty((len(queries), len(rows)), np.float32)
+            sketch, margin = sketches[id(view)]
+            kernel(sketch, rows, out)
+            adjust_bounds(out, margin, rows.shape[1])
+            if not one:
+                bounds[:, at] = out
+
+        width = max(v.sketch.rows.shape[1] for v in self.views if v.sketch)
+        _parallel(blocks, work, (block_rows, width))
+        return bounds
+
+    def _first(self, j: int, query: np.ndarray, bounds: np.ndarray) -> np.float32:
+        """Exact distances of about the `_FIRST` rows of smallest bounds; return their cutoff.
+
+        The rows evaluated are those whose bound is at most the cutoff, estimated from a
+        sample of the bounds, and raised until k distances are known.
+        """
+        step = max(1, len(bounds) // _SAMPLE)
+        sample = np.sort(bounds[::step][~self.excluded[::step]])
+        nth = -(-max(_FIRST, 4 * self.best.k) // step)
+        done = None
+        while True:
+            cutoff = sample[nth - 1] if nth <= len(sample) else np.float32(np.inf)
+            chosen = ~(bounds > cutoff)  # NaN bounds too: they rule nothing out
+            if done is not None:
+                chosen &= bounds > done
+            rows = np.flatnonzero(chosen)
+            self._exact(j, query, rows[~self.excluded[rows]])
+            if np.isfinite(self.best.kth(j)) or not np.isfinite(cutoff):
+                return cutoff
+            done, nth = cutoff, 4 * nth
+
+    def _candidates(self, j: int, bounds: np.ndarray, cutoff: np.float32) -> np.ndarray:
+        """The rows not evaluated yet that the k-th best distance of query j does not rule out."""
+        limit = threshold(self.best.kth(j), self.width)
+        if not limit > cutoff:
+            return np.zeros(0, np.int64)
+        rows = np.flatnonzero((bounds > cutoff) & ~(bounds > limit))
+        return rows[~self.excluded[rows]]
+
+    def _refine(self, j: int, query: np.ndarray, bounds: np.ndarray, rows: np.ndarray) -> None:
+        """Exact distances of the candidates that the k-th best still leaves, block by block."""
+        seg = np.searchsorted(self.starts, rows, side="right") - 1
+        tasks = []
+        for i in np.unique(seg):
+            view, plan = self.views[i], self.plans[i]
+            local = rows[seg == i] - view.start
+            which = np.searchsorted([b.start for b in plan], local, side="right") - 1
+            cut = np.flatnonzero(np.diff(which, prepend=-1)).tolist() + [len(local)]
+            tasks += [(int(i), local[a:b]) for a, b in zip(cut[:-1], cut[1:], strict=True)]
+        block_rows = max((b.stop - b.start for plan in self.plans for b in plan), default=1)
+
+        def work(task: tuple[int, np.ndarray], buffer: np.ndarray, lock: threading.Lock) -> None:
+            i, local = task
+            start = self.views[i].start
+            local = local[~(bounds[start + local] > threshold(self.best.kth(j), self.width))]
+            if len(local):
+                self._exact(j, query, start + local, buffer, lock)
+
+        _parallel(tasks, work, (block_rows, self.width))
+
+    def _exact(
+        self,
+        j: int,
+        query: np.ndarray,
+        rows: np.ndarray,
+        buffer: np.ndarray | None = None,
+        lock: threading.Lock | None = None,
+    ) -> None:
+        """Compute the float32 distances of query j to some rows (ascending) and merge them.
+
+        At most ``len(buffer)`` rows (`_BLOCK_ROWS` without one) are read at a time.
+        """
+        if buffer is None:
+            buffer = np.empty((min(len(rows), _BLOCK_ROWS), self.width), np.float32)
+        seg = np.searchsorted(self.starts, rows, side="right") - 1
+        for i in np.unique(seg):
+            view, mine = self.views[i], rows[seg == i]
+            for first in range(0, len(mine), len(buffer)):
+                picked = mine[first : first + len(buffer)]
+                values = read_rows(view.signatures, self.plans[i], picked - view.start, buffer)
+                dist = np.empty((1, len(values)), np.float32)
+                self.kernel(query[None], values, dist)
+                with lock or contextlib.nullcontext():
+                    self.best.merge_rows(j, picked, dist[0])
 
 
 def search(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[Hit]]:
@@ -163,6 +330,10 @@ class _Best:
         self.dist = np.full((n_queries, k), np.nan, np.float32)
         self.rows = np.full((n_queries, k), n_rows, np.int64)
 
+    def kth(self, query: int) -> float:
+        """The k-th smallest distance of a query so far: NaN while fewer than k are held."""
+        return float(self.dist[query, -1])
+
     def merge(
         self, first_query: int, first_row: int, dist: np.ndarray, live: np.ndarray | None
     ) -> None:
@@ -176,10 +347,21 @@ class _Best:
             candidates &= live
         for j in np.flatnonzero(candidates.any(axis=1)):
             new = np.flatnonzero(candidates[j])
-            d = np.concatenate([self.dist[first_query + j], dist[j, new]])
-            r = np.concatenate([self.rows[first_query + j], new + first_row])
-            keep = np.lexsort((r, d))[: self.k]
-            self.dist[first_query + j], self.rows[first_query + j] = d[keep], r[keep]
+            self._take(first_query + int(j), dist[j, new], new + first_row)
+
+    def merge_rows(self, query: int, rows: np.ndarray, dist: np.ndarray) -> None:
+        """Take in distances (m,) from one query to some rows (m,)."""
+        new = ~(dist > self.dist[query, -1])
+        if new.any():
+            self._take(query, dist[new], rows[new])
+
+    def _take(self, query: int, dist: np.ndarray, rows: np.ndarray) -> None:
+        """Keep the k best of those held and some candidates; a row held already is not added."""
+        fresh = ~np.isin(rows, self.rows[query])
+        d = np.concatenate([self.dist[query], dist[fresh]])
+        r = np.concatenate([self.rows[query], rows[fresh]])
+        keep = np.lexsort((r, d))[: self.k]
+        self.dist[query], self.rows[query] = d[keep], r[keep]
 
     def result(self, reader: IndexReader) -> tuple[np.ndarray, np.ndarray]:
         """Row numbers of the reader and distances, nearest first."""
@@ -188,12 +370,40 @@ class _Best:
         )
 
 
-def _next(
-    blocks: Iterator[tuple[SegmentView, Block]], lock: threading.Lock
-) -> tuple[SegmentView, Block] | None:
-    """The next block to scan and its segment, shared by the threads."""
+Task = TypeVar("Task")
+
+
+def _parallel(
+    tasks: list[Task],
+    work: Callable[[Task, np.ndarray, threading.Lock], None],
+    buffer_shape: tuple[int, int],
+) -> None:
+    """Run ``work(task, buffer, lock)`` on every task, one thread per core, each with a buffer.
+
+    The lock is shared: ``work`` holds it while it changes shared state.
+    """
+    if not tasks:
+        return
+    todo, lock = iter(tasks), threading.Lock()
+
+    def run() -> None:
+        buffer = np.empty(buffer_shape, np.float32)
+        while (task := _next(todo, lock)) is not None:
+            work(task, buffer, lock)
+
+    threads = min(_threads(), len(tasks))
+    if threads == 1:
+        run()
+        return
+    with ThreadPoolExecutor(threads) as pool:
+        for done in [pool.submit(run) for _ in range(threads)]:
+            done.result()
+
+
+def _next(tasks: Iterator[Task], lock: threading.Lock) -> Task | None:
+    """The next task, shared by the threads."""
     with lock:
-        return next(blocks, None)
+        return next(tasks, None)
 
 
 def _threads() -> int:

@@ -2,8 +2,9 @@
 
 A segment holds the rows of one commit (or of several merged by compaction), with the columns
 of the format-1 index file, the sorted 64-bit keys of its names (so that a writer finds a name
-without reading the names), the rows of older segments it supersedes, and a CRC-32 per chunk of
-signatures and per column. Layout: docs/index-format.md.
+without reading the names), the rows of older segments it supersedes, the sketch of each row
+(`cfsig.sketch`, the lower bounds a search prunes by), and a CRC-32 per chunk of signatures and
+per column. Layout: docs/index-format.md.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import h5py
 import numpy as np
 
 from .errors import IndexFileError
+from .sketch import sketch_center, sketch_groups, sketch_rows
 
 SEGMENT_FORMAT = "cfsig-segment"
 STRING = h5py.string_dtype("utf-8")
@@ -33,7 +35,9 @@ COLUMNS = (*TEXT, "sha256", *META)  # the columns of a row besides its signature
 _DTYPES = {**{k: STRING for k in TEXT}, "sha256": "S64", **META}
 _CHUNK_ROWS = 4096  # rows per chunk of signatures, each with its CRC-32
 _PIECE_CHUNKS = 16  # chunks copied at a time by a merge: bounds its memory
+_SKETCH_CHUNK_ROWS = 65536  # rows per chunk of sketches (8.9 MB at 34 float32): few reads a scan
 _EXTRA = ("key_sorted", "key_rows", "drops", "signature_crc32")
+SKETCH_EXTRA = ("sketch_groups", "sketch_center", "sketch_error")  # with the dataset `sketch`
 Piece = dict[str, np.ndarray]  # "signatures" (m, length) float32 and every column (m,)
 
 
@@ -96,7 +100,10 @@ def chunk_crcs(signatures: np.ndarray, chunk_rows: int) -> np.ndarray:
 def write_segment(
     path: Path, segment_id: int, width: int, rows: int, pieces: Iterable[Piece], drops: np.ndarray
 ) -> None:
-    """Write a segment file from pieces of rows, with the keys of its names and its checksums.
+    """Write a segment file from pieces of rows, with the keys of its names, sketches, checksums.
+
+    The sketches are computed from the signatures (`cfsig.sketch`), on a centre taken from the
+    first piece (`sketch_center`).
 
     Parameters
     ----------
@@ -120,18 +127,29 @@ def write_segment(
         The pieces do not hold ``rows`` rows.
     """
     chunk = max(1, min(_CHUNK_ROWS, rows))
+    groups = sketch_groups(width)
+    center, error = np.zeros(len(groups)), 0.0
     with h5py.File(path, "w", libver="latest") as f:
         f.attrs.update(format=SEGMENT_FORMAT, segment=segment_id)
         sigs = f.create_dataset(
             "signatures", (rows, width), np.float32, chunks=(chunk, width) if rows else None
         )
+        sketch_chunk = (min(_SKETCH_CHUNK_ROWS, rows), len(groups)) if rows else None
+        sketches = f.create_dataset("sketch", (rows, len(groups)), np.float32, chunks=sketch_chunk)
         columns = {k: f.create_dataset(k, (rows,), _DTYPES[k]) for k in COLUMNS}
-        crcs = dict.fromkeys(COLUMNS, 0)
+        crcs = dict.fromkeys((*COLUMNS, "sketch"), 0)
         sig_crcs, keys, start = [], [], 0
         for piece in _regroup(pieces, chunk * _PIECE_CHUNKS):
-            stop = start + len(piece["signatures"])
-            sigs[start:stop] = piece["signatures"]
-            sig_crcs.append(chunk_crcs(piece["signatures"], chunk))
+            rows32 = np.asarray(piece["signatures"], np.float32)  # the sketch of what is stored
+            stop = start + len(rows32)
+            sigs[start:stop] = rows32
+            sig_crcs.append(chunk_crcs(rows32, chunk))
+            if start == 0:
+                center = sketch_center(rows32, groups)
+            sketch, piece_error = sketch_rows(rows32, groups, center)
+            sketches[start:stop] = sketch
+            crcs["sketch"] = column_crc(sketch, crcs["sketch"])
+            error = max(error, piece_error)
             for key in COLUMNS:
                 values = np.asarray(piece[key], dtype=columns[key].dtype)
                 columns[key][start:stop] = values
@@ -147,11 +165,14 @@ def write_segment(
             "key_rows": order.astype(np.uint32),
             "drops": np.asarray(drops, np.int64).reshape(-1, 2),
             "signature_crc32": np.concatenate([np.zeros(0, np.uint32), *sig_crcs]),
+            "sketch_groups": groups,
+            "sketch_center": center,
+            "sketch_error": np.array([error]),
         }
         for key, values in extra.items():
             f.create_dataset(key, data=values)
         f.attrs.update({f"crc32_{k}": np.uint32(v) for k, v in crcs.items()})
-        f.attrs.update({f"crc32_{k}": np.uint32(column_crc(extra[k])) for k in _EXTRA})
+        f.attrs.update({f"crc32_{k}": np.uint32(column_crc(v)) for k, v in extra.items()})
 
 
 def scan_segment(
@@ -172,7 +193,8 @@ def scan_segment(
     Yields
     ------
     piece : dict
-        As `write_segment` takes it, strings as ``str``.
+        As `write_segment` takes it, strings as ``str``. A segment's sketches are checked, not
+        yielded (a segment written before sketches existed has none).
 
     Raises
     ------
@@ -181,13 +203,15 @@ def scan_segment(
         piece).
     """
     sigs = f["signatures"]
-    n, verify = sigs.shape[0], "signature_crc32" in f
+    n, verify, sketched = sigs.shape[0], "signature_crc32" in f, "sketch" in f
     chunk = sigs.chunks[0] if sigs.chunks else _CHUNK_ROWS
     step = chunk * _PIECE_CHUNKS
     want = f["signature_crc32"][:] if verify else None
-    crcs = dict.fromkeys(COLUMNS, 0)
+    crcs = dict.fromkeys((*COLUMNS, "sketch") if sketched else COLUMNS, 0)
     for start in range(0, n, step):
         stop = min(start + step, n)
+        if sketched:  # checked, not yielded: a new segment computes its own
+            crcs["sketch"] = column_crc(f["sketch"][start:stop], crcs["sketch"])
         piece = {"signatures": sigs[start:stop]}
         for key in COLUMNS:
             piece[key] = f[key][start:stop]  # strings as bytes: checked before they are decoded
@@ -204,7 +228,7 @@ def scan_segment(
         yield {key: values[keep] for key, values in piece.items()}
     if not verify:
         return
-    for key in _EXTRA:
+    for key in (*_EXTRA, *SKETCH_EXTRA) if sketched else _EXTRA:
         crcs[key] = column_crc(f[key][:])
     for key, crc in crcs.items():
         if crc != int(f.attrs.get(f"crc32_{key}", -1)):

@@ -38,3 +38,16 @@ def build_index():
     """`helpers.build_index`: ``build_index(path, n, params)`` writes an index of ``n`` random
     signatures and returns their vectors."""
     return helpers.build_index
+
+
+@pytest.fixture(params=["numpy", "faiss"])
+def kernel(request, monkeypatch):
+    """Force one L1 kernel on every scan (faiss: skipped when it is not installed)."""
+    import cfsig.l1
+
+    if request.param == "faiss":
+        pytest.importorskip("faiss")
+        monkeypatch.setattr(cfsig.l1, "FAST_MIN_WORK", 0)
+    else:
+        monkeypatch.setattr(cfsig.l1, "fast_kernel", lambda: None)
+    return request.param

@@ -1,4 +1,5 @@
-"""A worker function for the batch tests: it kills its own process on files named crash*.off.
+"""A worker function for the batch tests: it kills its own process on files named crash*.off
+and raises an error that is not cfsig's on files named oops*.off.
 
 It lives in a module of its own so that spawned worker processes can import it by name.
 """
@@ -9,7 +10,9 @@ from cfsig.signature import signature_file
 
 
 def signature_or_crash(path, params, solver):
-    """`signature_file`, except that a file whose name starts with "crash" ends the process."""
+    """`signature_file`, except on files whose names start with "crash" or "oops"."""
     if os.path.basename(path).startswith("crash"):
         os._exit(3)
+    if os.path.basename(path).startswith("oops"):
+        raise RuntimeError("not a cfsig error")
     return signature_file(path, params, solver)

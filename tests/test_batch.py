@@ -143,6 +143,7 @@ def dask_cluster(tmp_path):
     env = dict(os.environ)
     root = str(Path(cfsig.__file__).resolve().parents[1])
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
+    env["DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES"] = "1"  # a crashing task fails sooner
     info = tmp_path / "scheduler.json"
     local = ["--host", "127.0.0.1", "--dashboard-address", "127.0.0.1:0"]
     procs = [_start(["distributed.cli.dask_scheduler", "--port", "0", *local,
@@ -181,6 +182,32 @@ def test_dask_cluster_gives_the_local_results(meshes, dask_cluster):
         order_a, order_b = np.argsort(a.column("names")), np.argsort(b.column("names"))
         assert list(a.column("names")[order_a]) == list(b.column("names")[order_b])
         assert np.array_equal(a.signatures[:][order_a], b.signatures[:][order_b])
+
+
+def test_dask_batches_lose_only_their_bad_files(meshes, dask_cluster, monkeypatch):
+    for name in ("crash.off", "oops.off", "f.off", "g.off"):
+        (meshes / "round" / name).write_bytes((meshes / "round" / "a.off").read_bytes())
+    paths = sorted(meshes.glob("*/*.off"), key=lambda p: p.name[0] in "co")  # bad files last
+    sizes = []
+    real_islice = batch.islice
+    monkeypatch.setattr(batch, "islice", lambda it, n: sizes.append(n) or real_islice(it, n))
+    monkeypatch.setattr(batch, "_TASK_SECONDS", 1e6)  # the largest batches once one is back
+    outcomes = list(compute_many(paths, Params(), scheduler=dask_cluster,
+                                 compute=signature_or_crash))  # fmt: skip
+    by_name = _by_name(outcomes)
+    assert len(outcomes) == len(paths) and sorted(by_name) == sorted(p.name for p in paths)
+    assert max(sizes) == batch._MAX_BATCH  # the bad files came in a batch with good ones
+    crash, oops = by_name["crash.off"], by_name["oops.off"]
+    assert crash.signature is None
+    assert crash.error.startswith(f"{meshes / 'round' / 'crash.off'}: failed on the cluster: ")
+    assert oops.signature is None
+    want = f"{meshes / 'round' / 'oops.off'}: failed on the cluster: not a cfsig error"
+    assert oops.error == want
+    assert "truncated" in by_name["broken.off"].error
+    for path in paths:
+        if path.name not in ("crash.off", "oops.off", "broken.off"):
+            expected = signature_file(path, Params()).vector
+            assert np.array_equal(by_name[path.name].signature.vector, expected)
 
 
 def test_jobs_and_scheduler_are_exclusive(meshes):

@@ -15,8 +15,6 @@ from cfsig.nearest import nearest, search
 from cfsig.params import Params
 from cfsig.signature import Signature
 
-KERNELS = ["numpy", "faiss"]
-
 
 def _histograms(n, seed, bins=200):
     h = np.random.default_rng(seed).random((n, bins))
@@ -43,17 +41,6 @@ def _build(path, hists, chunk_rows, monkeypatch):
         for i, h in enumerate(hists):
             sig = Signature(h, phi, 3, 1, 1, 0.0, (), 0.0, f"{i:064d}")
             w.add(Entry(f"m{i}.off", f"c{i % 4}", f"/d/m{i}.off"), sig)
-
-
-@pytest.fixture(params=KERNELS)
-def kernel(request, monkeypatch):
-    """Force one kernel on every scan."""
-    if request.param == "faiss":
-        pytest.importorskip("faiss")
-        monkeypatch.setattr(cfsig.l1, "FAST_MIN_WORK", 0)
-    else:
-        monkeypatch.setattr(cfsig.l1, "fast_kernel", lambda: None)
-    return request.param
 
 
 @pytest.mark.parametrize("n_queries", [1, 3, 17])
