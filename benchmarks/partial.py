@@ -1,6 +1,7 @@
 """Partial queries and genus changes on SHREC 2007, McGill and FAUST (docs/partial.md).
 
     python benchmarks/partial.py --data-root /work/data --doc docs/partial.md
+    python benchmarks/partial.py --scale 1000000 --real INDEX --dir DIR   # one query's time
 
 For every mesh of each collection (``--data-root``, where ``../shared/data/unpack`` puts them)
 the script makes two parts, seeded by the mesh's position so that every run makes the same:
@@ -31,7 +32,9 @@ os.environ.update(
 
 import argparse
 import collections
+import statistics
 import subprocess
+import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -220,6 +223,44 @@ def _genus_table(data: dict) -> list[str]:
     return [*lines, "", f"The {len(names)} outliers: " + "; ".join(names) + "."]
 
 
+def scale(rows: int, real: str, folder: Path) -> str:
+    """Seconds of one partial query over ``rows`` synthetic rows, in a fresh process.
+
+    The rows are `benchmarks/index_scale.py`'s mixed ones (two real signatures of the index
+    ``real`` blended, plus noise), written by its ``build``; the query's vectors for the seven
+    shares are the curvature columns of seven more such rows. Open, `cfsig.parts.partial_search`
+    for 20 results and their names, once untimed, then three times.
+    """
+    sys.path.insert(0, str(ROOT))
+    from benchmarks.index_scale import K, build, in_child, real_rows
+
+    path = folder / f"mixed-{rows}"
+    built = None if (path / "manifest.h5").exists() else build(path, rows, real_rows(real))
+    code = f"""
+import numpy as np
+from cfsig.index import IndexReader
+from cfsig.parts import SHARES, curvature_columns, partial_search
+from benchmarks.index_scale import PARAMS, real_rows, synthetic_rows
+rows = synthetic_rows(np.random.default_rng(6), len(SHARES), real_rows({real!r}))
+vectors = rows[:, curvature_columns(PARAMS)]
+def once():
+    t = time.perf_counter()
+    with IndexReader({str(path)!r}) as r:
+        hits, _ = partial_search(r, vectors, {K})
+    return time.perf_counter() - t
+once()
+out = {{'times': [once() for _ in range(3)]}}
+"""
+    out = in_child(code)
+    how = "reused" if built is None else f"built in {built:.0f} s"
+    return (
+        f"One partial query over {rows:,} rows ({how}"
+        f"): {statistics.median(out['times']):.3f} s (median of 3; "
+        + ", ".join(f"{t:.3f}" for t in out["times"])
+        + f"), peak {out['peak_mb']:.0f} MB; load average {os.getloadavg()[0]:.1f}."
+    )
+
+
 def main() -> None:
     """Measure, print and write the Markdown."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -227,7 +268,15 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2, help="worker processes")
     parser.add_argument("--doc", type=Path, help="write the tables into this Markdown file")
     parser.add_argument("--every", type=int, default=1, help="every k-th mesh (a quick look)")
+    parser.add_argument("--scale", type=int, help="time one partial query over this many rows")
+    parser.add_argument("--real", help="--scale: an index of real cfhks signatures")
+    parser.add_argument("--dir", type=Path, help="--scale: folder of the synthetic index")
     args = parser.parse_args()
+    if args.scale:
+        if not (args.real and args.dir):
+            parser.error("--scale needs --real INDEX and --dir DIR")
+        print(scale(args.scale, args.real, args.dir))
+        return
     results = {}
     for name in COLLECTIONS:
         results[name] = _measure(name, args.data_root, args.jobs, args.every)
