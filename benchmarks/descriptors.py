@@ -1,17 +1,19 @@
-"""The descriptors on SHREC 2007, McGill and FAUST in one run: cf, cfhks 1, cfhks 2, ShapeDNA.
+"""The descriptors on SHREC 2007, McGill and FAUST in one run: cf, cfhks 1 to 4, ShapeDNA.
 
 Stages (each prints Markdown for docs/descriptors.md; run from the repository root):
 
     python benchmarks/descriptors.py measure    # every descriptor of every mesh, CPU timed -> cache
     python benchmarks/descriptors.py study      # how version 2 was chosen: leave one collection out
-    python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all four
+    python benchmarks/descriptors.py study3     # how version 3 was chosen
+    python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all six
     python benchmarks/descriptors.py cost       # whole `cfsig index` runs: default, cf, ShapeDNA
-    python benchmarks/descriptors.py coarse     # version 2 on simplified copies: cheaper, worse?
+    python benchmarks/descriptors.py coarse     # version 4: the spectrum of a simplified copy
+    python benchmarks/descriptors.py stages     # CPU seconds of each stage of versions 3 and 4
 
 ``measure`` computes, for every mesh of the three collections (``--data-root``, where
-``../shared/data/unpack`` puts them), four descriptors from the file, each timed in CPU seconds
+``../shared/data/unpack`` puts them), six descriptors from the file, each timed in CPU seconds
 of its worker process with one BLAS thread, reading included: ``cf`` (the paper's), ``cfhks``
-versions 1 and 2 (`cfsig.cfhks.DESIGNS`) and ShapeDNA (lapy, the 50 smallest nonzero
+versions 1 to 4 (`cfsig.cfhks.DESIGNS`) and ShapeDNA (lapy, the 50 smallest nonzero
 eigenvalues times the area divided by their index, compared by L2, as in the issue's table). It
 also keeps the unweighted channels of version 2 (phi, the spectrum, heat at eight times), from
 which ``study`` builds every candidate weighting. Caches go under ``--cache`` (never commit).
@@ -27,10 +29,11 @@ on every 10th SHREC 2007 mesh (40) with the default descriptor and with ``--desc
 ShapeDNA on the same files in one process (this script's ``shapedna`` stage), and ``cfsig
 index`` with two jobs on all 400 for both descriptors.
 
-``coarse`` measures the first candidate of the issue for a cheaper spectrum: version 2 computed
-on a copy of each mesh simplified by fast-simplification to ``--vertices`` vertices (meshes
-already that small are used as they are), its FT and CPU seconds per mesh against version 2 on
-the full mesh from the same run's cache.
+``coarse`` chooses version 4's copy: version 3 with the spectrum and heat computed on a copy of
+each mesh simplified by fast-simplification to each of ``--faces`` faces (meshes with fewer are
+used as they are), FT and CPU seconds per mesh against version 3 on the full mesh; the copy
+chosen is the smallest whose mean FT on SHREC 2007 and FAUST (version 3's training
+collections) is within 0.01 of version 3's.
 """
 
 from __future__ import annotations
@@ -51,17 +54,21 @@ import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
 
 from cfsig import cfhks
-from cfsig.conformal import conformal_factor
+from cfsig.conformal import conformal_factor, factorize
+from cfsig.curvature import smoothed_curvature
 from cfsig.measures import RetrievalReport, evaluate_distances
 from cfsig.mesh import read_mesh
 from cfsig.params import VERSIONS, Params
 from cfsig.repair import repair_mesh
 from cfsig.signature import signature_file
+from cfsig.simplify import simplified_mesh
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA_ROOT = ROOT.parent / "shared" / "data"
@@ -74,6 +81,7 @@ DESCRIPTORS = {
     "cfhks 1": Params(descriptor="cfhks", version=1),
     "cfhks 2": Params(descriptor="cfhks", version=2),
     "cfhks 3": Params(descriptor="cfhks", version=3),
+    "cfhks 4": Params(descriptor="cfhks", version=4),
 }
 NAMES = (*DESCRIPTORS, "ShapeDNA")
 V2 = cfhks.DESIGNS[2]
@@ -425,64 +433,128 @@ def cost(args: argparse.Namespace) -> None:
 
 
 def _coarse_one(item: tuple[Path, int]) -> tuple[np.ndarray, float]:
-    """Version 2 of one mesh simplified to at most ``vertices`` vertices, and its CPU seconds."""
-    import fast_simplification
-
-    from cfsig.mesh import clean_mesh
-
-    path, vertices = item
+    """Version 3 of one mesh with the spectrum and heat of a copy of ``faces`` faces (version 4's
+    design with that copy), and its CPU seconds, reading included."""
+    path, faces = item
+    design = replace(cfhks.DESIGNS[4], coarse=faces)
     start = time.process_time()
     mesh = repair_mesh(read_mesh(path))
-    if len(mesh.vertices) > vertices:
-        reduction = 1 - vertices / len(mesh.vertices)
-        mesh = clean_mesh(*fast_simplification.simplify(mesh.vertices, mesh.faces, reduction))
     cf = conformal_factor(mesh, Params().mollify)
-    vector = cfhks.weigh(cfhks.channels(cf, V2.times), V2)
+    copy = simplified_mesh(mesh, faces)
+    vector = cfhks.weigh(cfhks.channels(cf, design.times, design.scales, copy), design)
     return vector, time.process_time() - start
 
 
 def coarse(args: argparse.Namespace) -> None:
-    """FT and CPU seconds of version 2 on simplified copies against the full meshes."""
+    """FT and CPU seconds of version 3 with the spectrum of simplified copies (version 4's
+    choice of the copy's size), against version 3 on the full mesh from the cache."""
     data = _load(args.cache)
-    print("| collection | vertices | FT | CPU s per mesh (median) |\n|---|---|---|---|")
-    for c in ("shrec07", "faust"):
-        full = _report(_distances("cfhks 2", data[c]["cfhks 2"]), data[c]["labels"])
-        print(f"| {c} | all | {full.measures['FT']:.3f} | {np.median(data[c]['cfhks 2 s']):.3f} |")
-        for vertices in args.vertices:
-            items = [(path, vertices) for path in _paths(args.data_root, c)]
+    print("| faces of the copy | " + " | ".join(f"{c} FT" for c in COLLECTIONS), end=" | ")
+    print(" | ".join(f"{c} CPU s" for c in COLLECTIONS) + " |\n|---|" + "---|" * 6)
+    rows = {"all (version 3)": {c: (_ft("cfhks 3", data[c]), data[c]["cfhks 3 s"]) for c in data}}
+    for faces in args.faces:
+        rows[str(faces)] = {}
+        for c in COLLECTIONS:
+            items = [(path, faces) for path in _paths(args.data_root, c)]
             with ProcessPoolExecutor(args.jobs) as pool:
-                rows = list(pool.map(_coarse_one, items, chunksize=2))
-            vectors = np.array([vector for vector, _ in rows])
-            ft = _report(_distances("cfhks 2", vectors), data[c]["labels"]).measures["FT"]
-            seconds = np.median([s for _, s in rows])
-            print(f"| {c} | {vertices} | {ft:.3f} | {seconds:.3f} |", flush=True)
+                measured = list(pool.map(_coarse_one, items, chunksize=2))
+            vectors = np.array([vector for vector, _ in measured])
+            ft = _report(_distances("cfhks", vectors), data[c]["labels"]).measures["FT"]
+            rows[str(faces)][c] = (ft, np.array([s for _, s in measured]))
+    for name, row in rows.items():
+        cells = [f"{row[c][0]:.3f}" for c in COLLECTIONS]
+        cells += [f"{np.median(row[c][1]):.3f}" for c in COLLECTIONS]
+        print(f"| {name} | " + " | ".join(cells) + " |")
+    full = np.mean([rows["all (version 3)"][c][0] for c in V3_CHOSEN_ON])
+    fits = [
+        f for f in args.faces if np.mean([rows[str(f)][c][0] for c in V3_CHOSEN_ON]) >= full - 0.01
+    ]
+    print(
+        f"\nThe smallest copy whose mean FT on {' and '.join(V3_CHOSEN_ON)} is within 0.01 of "
+        f"version 3's ({full:.4f}): {min(fits) if fits else 'none'} faces"
+    )
+
+
+def _stages_one(path: Path) -> dict[str, float]:
+    """CPU seconds of each stage of versions 3 and 4 on one mesh, and the curvature's agreement
+    with four sparse factorisations."""
+    design = cfhks.DESIGNS[4]
+    seconds: dict[str, float] = {}
+
+    def timed(name, step):
+        start = time.process_time()
+        result = step()
+        seconds[name] = time.process_time() - start
+        return result
+
+    mesh = timed("read and repair", lambda: repair_mesh(read_mesh(path)))
+    cf = timed("phi (the conformal solve)", lambda: conformal_factor(mesh, Params().mollify))
+    ops = cf.operators
+    values = timed("curvature, conjugate gradients", lambda: smoothed_curvature(ops, design.scales))
+    area = ops.vertex_area.sum()
+    defect = np.where(ops.boundary, 0.0, ops.curvature)
+
+    def factorised():
+        systems = [sp.diags(ops.vertex_area) - (s * area) * ops.laplacian for s in design.scales]
+        return np.array([factorize(sp.csc_matrix(a), "auto")(defect) for a in systems]).T * area
+
+    exact = timed("curvature, four factorisations", factorised)
+    timed("spectrum and heat, full mesh", lambda: cfhks.channels(cf, design.times))
+    copy = timed("simplified copy", lambda: simplified_mesh(mesh, design.coarse))
+    timed("spectrum and heat, copy", lambda: cfhks.channels(cf, design.times, (), copy))
+    seconds["difference"] = float(np.abs(values - exact).max() / np.abs(exact).max())
+    return seconds
+
+
+def stages(args: argparse.Namespace) -> None:
+    """CPU seconds of each stage of versions 3 and 4, summed over every k-th SHREC 2007 mesh."""
+    paths = sorted(_paths(args.data_root, "shrec07"), key=lambda p: int(p.stem))[:: args.every]
+    with ProcessPoolExecutor(args.jobs) as pool:
+        rows = list(pool.map(_stages_one, paths))
+    print(f"CPU seconds summed over {len(paths)} SHREC 2007 meshes (every {args.every}th):\n")
+    print("| stage | seconds |\n|---|---|")
+    print(
+        "\n".join(f"| {k} | {sum(r[k] for r in rows):.2f} |" for k in rows[0] if k != "difference")
+    )
+    difference = max(r["difference"] for r in rows)
+    print(f"\nLargest difference of the curvature, relative to its largest value: {difference:.1e}")
+
+
+def _ft(name: str, arrays: dict[str, np.ndarray]) -> float:
+    """A cached descriptor's first tier on its collection."""
+    return _report(_distances(name, arrays[name]), arrays["labels"]).measures["FT"]
 
 
 def main() -> None:
     """Parse the command line and run one stage."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    stages = {
+    runs = {
         "measure": measure,
         "study": study,
         "study3": study3,
         "compare": compare,
         "cost": cost,
         "coarse": coarse,
+        "stages": stages,
     }
-    parser.add_argument("stage", choices=(*stages, "shapedna"))
+    parser.add_argument("stage", choices=(*runs, "shapedna"))
     parser.add_argument("files", nargs="*", type=Path, help="the shapedna stage's meshes")
     parser.add_argument("--data-root", type=Path, default=DATA_ROOT, help="unpacked collections")
     parser.add_argument("--cache", type=Path, default=CACHE, help="folder of the caches")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes of measure")
-    parser.add_argument("--every", type=int, default=10, help="cost: every k-th SHREC07 mesh")
+    parser.add_argument(
+        "--every", type=int, default=10, help="cost, stages: every k-th SHREC07 mesh"
+    )
     parser.add_argument("--rounds", type=int, default=3, help="cost: rounds of timings")
-    parser.add_argument("--vertices", type=int, nargs="+", default=[1000, 2000], help="coarse")
+    parser.add_argument(
+        "--faces", type=int, nargs="+", default=[2000, 4000, 8000], help="coarse: copies' faces"
+    )
     args = parser.parse_args()
     if args.stage == "shapedna":
         for path in args.files:
             shapedna(path)
         return
-    stages[args.stage](args)
+    runs[args.stage](args)
 
 
 if __name__ == "__main__":

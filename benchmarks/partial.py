@@ -15,11 +15,11 @@ the script makes two parts, seeded by the mesh's position so that every run make
 
 Each part is a query against the collection's whole shapes, the part's own whole among them,
 relevant the wholes of its class (`cfsig.measures.evaluate_queries`), ranked three ways: as a
-whole shape (its ``cfhks`` signature, what ``cfsig query`` does), by the partial distance of
+whole shape (its default ``cfhks`` signature, what ``cfsig query`` does), by the partial distance of
 the curvature channel alone (`cfsig.parts.partial_distances`), and as ``cfsig query --partial``
 ranks (`cfsig.parts.expanded_distances`). It also lists SHREC 2007's genus outliers, the meshes
 whose Euler characteristic is not their class's most common one, with their first tier (FT)
-against the other queries of their classes, for ``cfhks`` versions 2 and 3.
+against the other queries of their classes, for ``cfhks`` versions 2 and 3 and the default.
 """
 
 from __future__ import annotations
@@ -54,6 +54,7 @@ from cfsig.signature import compute_signature
 ROOT = Path(__file__).resolve().parents[1]
 COLLECTIONS = ("shrec07", "mcgill", "faust")
 KINDS = ("cut", "holes")
+DEFAULT = Params(descriptor="cfhks")  # the latest version
 V3 = Params(descriptor="cfhks", version=3)
 V2 = Params(descriptor="cfhks", version=2)
 MEASURES = ("NN", "FT", "mAP")
@@ -144,6 +145,7 @@ def _one(item: tuple[Path, int]) -> dict:
     rng = np.random.default_rng(seed)
     mesh = read_mesh(path)
     row: dict = {
+        "default": compute_signature(mesh, DEFAULT).vector,
         "v3": compute_signature(mesh, V3).vector,
         "v2": compute_signature(mesh, V2).vector,
         "chi": len(mesh.vertices)
@@ -153,8 +155,8 @@ def _one(item: tuple[Path, int]) -> dict:
     for kind, make in (("cut", cut), ("holes", holes)):
         part = make(mesh, rng)
         row[f"{kind} share"] = _area(part).sum() / _area(mesh).sum()
-        row[f"{kind} partial"] = partial_vectors(operators(part, V3.mollify), V3)
-        row[f"{kind} whole"] = compute_signature(part, V3).vector
+        row[f"{kind} partial"] = partial_vectors(operators(part, DEFAULT.mollify), DEFAULT)
+        row[f"{kind} whole"] = compute_signature(part, DEFAULT).vector
     return row
 
 
@@ -180,16 +182,16 @@ def _partial_table(results: dict[str, dict]) -> list[str]:
     ]
     for name, data in results.items():
         labels = data["labels"]
-        wholes = data["v3"]
+        wholes = data["default"]
         for kind in KINDS:
             share = data[f"{kind} share"]
             rankings = {
                 "as a whole shape": l1_distances(data[f"{kind} whole"], wholes),
                 "partial distance": np.array(
-                    [partial_distances(v, wholes, V3) for v in data[f"{kind} partial"]]
+                    [partial_distances(v, wholes, DEFAULT) for v in data[f"{kind} partial"]]
                 ),
                 "--partial": np.array(
-                    [expanded_distances(v, wholes, V3) for v in data[f"{kind} partial"]]
+                    [expanded_distances(v, wholes, DEFAULT) for v in data[f"{kind} partial"]]
                 ),
             }
             for ranked, distances in rankings.items():
@@ -209,7 +211,11 @@ def _genus_table(data: dict) -> list[str]:
     mixed = np.isin(labels, labels[outlier])
     lines = ["| descriptor | outliers FT | other queries of their classes FT | all NN | all FT |"]
     lines.append("|---|---|---|---|---|")
-    for key, title in (("v2", "cfhks 2"), ("v3", "cfhks 3")):
+    for key, title in (
+        ("v2", "cfhks 2"),
+        ("v3", "cfhks 3"),
+        ("default", f"cfhks {DEFAULT.version}"),
+    ):
         report = evaluate_distances(l1_distances(data[key], data[key]), labels)
         ft = report.per_query[:, 1]
         lines.append(

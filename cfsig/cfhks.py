@@ -32,6 +32,9 @@ Versions (`Params.version`; an index stores its own, and a query recomputes with
    McGill together, with the medians averaged over those two collections.
 3. Version 2 plus curvature at four scales (0.0000156 to 0.001, quadrupling), weighed like
    all of version 2 together, chosen on SHREC 2007 and FAUST (McGill held out).
+4. Version 3 with the spectrum and the heat kernel signature computed on a copy of the mesh
+   simplified to ``coarse`` faces (`cfsig.simplify`), at a fraction of the eigenproblem's cost;
+   phi and the curvature stay on the full mesh, bit for bit version 3's.
 """
 
 from __future__ import annotations
@@ -40,8 +43,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .conformal import ConformalFactor
+from .conformal import ConformalFactor, factorize_laplacian, operators
 from .curvature import smoothed_curvature
+from .errors import SolverError
+from .mesh import Mesh
+from .simplify import simplified_mesh
 from .spectrum import heat_kernel_signature, laplace_spectrum
 
 QUANTILES = 64
@@ -70,6 +76,9 @@ class Design:
         channel out.
     curvature : float
         Divisor of each scale's curvature distance.
+    coarse : int
+        Faces of the simplified copy on which the spectrum and heat are computed; 0 computes
+        them on the mesh itself.
     """
 
     times: tuple[float, ...]
@@ -78,6 +87,7 @@ class Design:
     heat: tuple[float, ...]
     scales: tuple[float, ...] = ()
     curvature: float = 1.0
+    coarse: int = 0
 
     @property
     def length(self) -> int:
@@ -99,10 +109,14 @@ _V2 = Design(_V2_TIMES, None, 0.3173, (len(_V2_TIMES) * 0.2152 / 3,) * len(_V2_T
 # Version 3's scales and curvature divisor, printed by `python benchmarks/descriptors.py study3`:
 # the median curvature distance over SHREC 2007's and FAUST's pairs, relative to the median of
 # version 2's distance there (weight 1, docs/descriptors.md).
+_V3 = replace(_V2, scales=tuple(0.0000625 * 4.0**j for j in range(-1, 3)), curvature=0.015153)
+# Version 4's copy: 4000 faces, about 2000 vertices on a closed surface, chosen on SHREC 2007
+# and FAUST by `python benchmarks/descriptors.py coarse` (docs/descriptors.md).
 DESIGNS = {
     1: Design((0.005, 0.01, 0.02, 0.04), 1.834, 0.2815, tuple(s * 4.038 for s in _V1_HEAT)),
     2: _V2,
-    3: replace(_V2, scales=tuple(0.0000625 * 4.0**j for j in range(-1, 3)), curvature=0.015153),
+    3: _V3,
+    4: replace(_V3, coarse=4000),
 }
 
 
@@ -155,7 +169,10 @@ def curvature_histograms(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 
 def channels(
-    cf: ConformalFactor, times: tuple[float, ...], scales: tuple[float, ...] = ()
+    cf: ConformalFactor,
+    times: tuple[float, ...],
+    scales: tuple[float, ...] = (),
+    coarse: Mesh | None = None,
 ) -> dict[str, np.ndarray]:
     """The unweighted channels of a mesh whose conformal factor is known.
 
@@ -167,6 +184,9 @@ def channels(
         Diffusion times of the heat channel divided by the surface area (`Design.times`).
     scales : tuple of float
         Scales of the curvature channel (`Design.scales`).
+    coarse : Mesh or None
+        A simplified copy of the mesh (`cfsig.simplify.simplified_mesh`) on which the spectrum
+        and heat are computed, with its own factorisation; None computes them with ``cf``'s.
 
     Returns
     -------
@@ -182,13 +202,20 @@ def channels(
         The eigenvalue iteration or a curvature diffusion failed.
     """
     ops = cf.operators
-    spectrum = laplace_spectrum(ops.laplacian, ops.vertex_area, ops.labels, cf.solve, EIGENPAIRS)
+    weights = ops.vertex_area / ops.vertex_area.sum()
+    spectrum_ops, solve = ops, cf.solve
+    if coarse is not None:
+        spectrum_ops = operators(coarse)
+        solve = factorize_laplacian(spectrum_ops.laplacian, spectrum_ops.labels)
+    spectrum = laplace_spectrum(
+        spectrum_ops.laplacian, spectrum_ops.vertex_area, spectrum_ops.labels, solve, EIGENPAIRS
+    )
     area = spectrum.area
-    weights = ops.vertex_area / area
     scaled = np.log(spectrum.eigenvalues * area)
     scaled = np.concatenate([scaled, np.full(EIGENPAIRS - len(scaled), scaled[-1])])
     hks = heat_kernel_signature(spectrum, np.asarray(times) * area)
-    heat = np.array([weighted_quantiles(np.log(area * h), weights, QUANTILES) for h in hks.T])
+    heat_weights = spectrum.vertex_area / area
+    heat = np.array([weighted_quantiles(np.log(area * h), heat_weights, QUANTILES) for h in hks.T])
     return {
         "phi": weighted_quantiles(cf.phi, weights, QUANTILES),
         "spectrum": scaled,
@@ -243,13 +270,15 @@ def weigh_curvature(histograms: np.ndarray, design: Design) -> np.ndarray:
     return (histograms / (CURVATURE_BINS * design.curvature)).ravel()
 
 
-def cfhks_vector(cf: ConformalFactor, version: int) -> np.ndarray:
+def cfhks_vector(cf: ConformalFactor, mesh: Mesh, version: int) -> np.ndarray:
     """The ``cfhks`` descriptor of a mesh whose conformal factor is known.
 
     Parameters
     ----------
     cf : ConformalFactor
-        Result of `conformal.conformal_factor`.
+        Result of `conformal.conformal_factor` on ``mesh``.
+    mesh : Mesh
+        The mesh, simplified for the spectrum when the version has a ``coarse`` copy.
     version : int
         A key of `DESIGNS`.
 
@@ -264,4 +293,10 @@ def cfhks_vector(cf: ConformalFactor, version: int) -> np.ndarray:
         The eigenvalue iteration failed.
     """
     design = DESIGNS[version]
+    coarse = simplified_mesh(mesh, design.coarse) if design.coarse else None
+    if coarse is not None:
+        try:
+            return weigh(channels(cf, design.times, design.scales, coarse), design)
+        except SolverError:
+            pass  # a copy the simplification left unsolvable: the spectrum of the mesh itself
     return weigh(channels(cf, design.times, design.scales), design)

@@ -7,11 +7,16 @@ from dataclasses import asdict, dataclass, fields, replace
 
 DESCRIPTORS = ("cf", "cfhks")
 # The versions of each descriptor, the last one the default (docs/descriptors.md).
-VERSIONS = {"cf": (1,), "cfhks": (1, 2, 3)}
+VERSIONS = {"cf": (1,), "cfhks": (1, 2, 3, 4)}
 REPAIR_MODES = ("auto", "off", "proxy")
 # The length of the cfhks vector per version, `cfsig.cfhks.DESIGNS[version].length`
 # (tests/test_cfhks.py checks that the two agree), here so that an index needs no SciPy.
-CFHKS_LENGTHS = {1: 64 + 30 + 64 * 4, 2: 30 + 64 * 8, 3: 30 + 64 * 8 + 48 * 4}
+CFHKS_LENGTHS = {
+    1: 64 + 30 + 64 * 4,
+    2: 30 + 64 * 8,
+    3: 30 + 64 * 8 + 48 * 4,
+    4: 30 + 64 * 8 + 48 * 4,
+}
 SOLVERS = ("auto", "cholmod", "eigen", "scipy")  # sparse solver backends (`cfsig.conformal`)
 
 

@@ -31,6 +31,7 @@ from .geometry import Edges, edge_lengths, face_areas, mesh_edges
 from .isolate import Limits, run_limited
 from .mesh import Mesh, clean_mesh
 from .params import REPAIR_MODES
+from .simplify import decimate
 
 # Boundary vertices of different parts closer than this fraction of the bounding-box diagonal
 # are stitched together.
@@ -511,14 +512,7 @@ def offset_surface(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
         vertices, oriented, PROXY_OFFSET * cell, PROXY_CELLS,
         igl.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER,
     )  # fmt: skip
-    vertices, faces = result[0], result[1]
-    if len(faces) > PROXY_FACES:
-        import fast_simplification
-
-        vertices, faces = fast_simplification.simplify(
-            vertices, faces.astype(np.int32), target_count=PROXY_FACES
-        )
-    return np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
+    return decimate(result[0], result[1], PROXY_FACES)
 
 
 def _part_areas(

@@ -136,15 +136,15 @@ def histogram(values: np.ndarray, params: Params) -> np.ndarray:
     return np.bincount(index, minlength=params.bins) / len(values)
 
 
-def signature_of(cf: ConformalFactor, faces: np.ndarray, params: Params) -> np.ndarray:
+def signature_of(cf: ConformalFactor, mesh: Mesh, params: Params) -> np.ndarray:
     """The signature of a mesh whose conformal factor is known, for ``params.descriptor``.
 
     Parameters
     ----------
     cf : ConformalFactor
         Result of `conformal_factor`.
-    faces : (m, 3) int64
-        The mesh's triangles.
+    mesh : Mesh
+        The mesh ``cf`` was solved on.
     params : Params
         Signature parameters.
 
@@ -161,11 +161,12 @@ def signature_of(cf: ConformalFactor, faces: np.ndarray, params: Params) -> np.n
     """
     if params.descriptor == "cfhks":
         assert params.version is not None  # resolved by Params.__post_init__
-        return cfhks_vector(cf, params.version)
+        return cfhks_vector(cf, mesh, params.version)
     phi = cf.phi
     if params.normalize:
         span = np.ptp(phi)
         phi = (phi - phi.min()) / span if span > 0 else np.zeros_like(phi)
+    faces = mesh.faces
     samples = sample_phi(
         faces, cf.operators.face_areas, phi, params.samples_per_face * len(faces), params.seed
     )
@@ -204,7 +205,7 @@ def _repair_and_sign(mesh: Mesh, params: Params, solver: str) -> tuple[Mesh, Sig
     start = time.perf_counter()
     mesh = repair_mesh(mesh, params.repair)
     cf = conformal_factor(mesh, params.mollify, solver)
-    hist = signature_of(cf, mesh.faces, params)
+    hist = signature_of(cf, mesh, params)
     repairs = mesh.repairs
     if cf.operators.mollified > 0:
         repairs += (f"mollified degenerate triangles (edges +{cf.operators.mollified:.3g})",)

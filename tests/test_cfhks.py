@@ -7,6 +7,7 @@ from click.testing import CliRunner
 from cfsig import cfhks
 from cfsig.cli import main
 from cfsig.conformal import conformal_factor
+from cfsig.errors import SolverError
 from cfsig.index import IndexReader, IndexWriter
 from cfsig.mesh import clean_mesh
 from cfsig.params import VERSIONS, Params, signature_length
@@ -170,3 +171,53 @@ def test_version_3_extends_version_2():
     v3 = compute_signature(mesh, Params(descriptor="cfhks", version=3)).vector
     assert np.array_equal(v3[: len(v2)], v2)
     assert len(v3) == len(v2) + len(cfhks.DESIGNS[3].scales) * cfhks.CURVATURE_BINS
+
+
+def _fine_bumpy(stretch=1.5):
+    """`_bumpy` at 20480 faces: more than version 4's copy."""
+    v, f = icosphere(5)
+    v = v * [1.0, 0.6, 0.5]
+    v[:, 0] += stretch * np.clip(v[:, 0], 0, None) ** 4
+    return v, f
+
+
+def test_version_4_is_version_3_on_a_mesh_smaller_than_its_copy():
+    mesh = clean_mesh(*_bumpy())
+    assert len(mesh.faces) <= cfhks.DESIGNS[4].coarse
+    v3 = compute_signature(mesh, Params(descriptor="cfhks", version=3)).vector
+    assert np.array_equal(compute_signature(mesh, CFHKS).vector, v3)
+
+
+def test_version_4_takes_only_the_spectrum_and_heat_from_the_copy():
+    v, f = _fine_bumpy()
+    mesh = clean_mesh(v, f)
+    v3 = compute_signature(mesh, Params(descriptor="cfhks", version=3)).vector
+    v4 = compute_signature(mesh, CFHKS).vector
+    curvature = cfhks.CURVATURE_BINS * len(cfhks.DESIGNS[4].scales)
+    assert np.array_equal(v4[-curvature:], v3[-curvature:])
+    assert not np.array_equal(v4, v3)
+    other = compute_signature(clean_mesh(*_fine_bumpy(stretch=4.0)), CFHKS).vector
+    # the copy's spectrum and heat stand for the mesh's: far closer than another shape's
+    assert np.abs(v4 - v3).sum() < 0.25 * np.abs(other - v4).sum()
+
+
+def test_version_4_is_nearly_invariant_to_rigid_motion_and_scale():
+    v, f = _fine_bumpy()
+    base = compute_signature(clean_mesh(v, f), CFHKS).vector
+    moved = compute_signature(
+        clean_mesh(0.2 * v @ random_rotation(7).T + [5.0, 1.0, -2.0], f), CFHKS
+    )
+    other = compute_signature(clean_mesh(*_fine_bumpy(stretch=4.0)), CFHKS).vector
+    # the simplification's collapse order may differ in the last bits, so not exactly
+    assert np.abs(moved.vector - base).sum() < 0.05 * np.abs(other - base).sum()
+
+
+def test_version_4_falls_back_to_the_mesh_when_its_copy_fails(monkeypatch):
+    mesh = clean_mesh(*_fine_bumpy())
+    v3 = compute_signature(mesh, Params(descriptor="cfhks", version=3)).vector
+
+    def fails(*args, **kwargs):
+        raise SolverError("the copy's Laplacian is singular")
+
+    monkeypatch.setattr(cfhks, "factorize_laplacian", fails)  # only the copy's factorisation
+    assert np.array_equal(compute_signature(mesh, CFHKS).vector, v3)

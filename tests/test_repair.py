@@ -1,6 +1,8 @@
 """The repair stage: every route of `cfsig.repair.repair_mesh` on generated meshes."""
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -340,10 +342,24 @@ def test_proxy_past_its_time_limit():
     assert isinstance(info.value, MeshError) and "proxy" in str(info.value)
 
 
-def test_proxy_past_its_memory_limit():
-    mesh = clean_mesh(*_interpenetrating())
-    with pytest.raises(StageLimitError):
-        repair_mesh(mesh, "proxy", Limits(memory_mb=64))
+def test_proxy_past_its_memory_limit(tmp_path):
+    # In a fresh interpreter, as the CLI runs: a forked child may reuse heap that its parent
+    # freed without new address space, so a long test session can hide the limit.
+    path = write_off(tmp_path / "two.off", *_interpenetrating())
+    code = (
+        "import sys\n"
+        "import igl  # loaded before the fork: what the limit meets is the stage itself\n"
+        "from cfsig.errors import StageLimitError\n"
+        "from cfsig.isolate import Limits\n"
+        "from cfsig.mesh import read_mesh\n"
+        "from cfsig.repair import repair_mesh\n"
+        "try:\n"
+        f"    repair_mesh(read_mesh({str(path)!r}), 'proxy', Limits(memory_mb=64))\n"
+        "except StageLimitError as exc:\n"
+        "    sys.exit(str(exc))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 1 and "more than 64 MiB" in result.stderr
 
 
 def _tiny_limits(path, params, solver):

@@ -1,0 +1,31 @@
+import numpy as np
+
+from cfsig.geometry import mesh_edges
+from cfsig.mesh import clean_mesh
+from cfsig.simplify import decimate, simplified_mesh
+from tests.helpers import icosphere
+
+
+def test_decimate_reaches_the_count_and_keeps_the_shape():
+    v, f = icosphere(4)  # 5120 faces
+    vertices, faces = decimate(v, f, 1000)
+    assert 900 <= len(faces) <= 1000 and faces.dtype == np.int64
+    radii = np.linalg.norm(vertices, axis=1)
+    assert np.allclose(radii, 1.0, atol=0.02)  # still the unit sphere
+
+
+def test_decimate_leaves_a_small_mesh_alone():
+    v, f = icosphere(2)
+    vertices, faces = decimate(v, f, len(f))
+    assert np.array_equal(vertices, v) and np.array_equal(faces, f)
+
+
+def test_simplified_mesh_is_checked_and_closed():
+    copy = simplified_mesh(clean_mesh(*icosphere(4)), 1000)
+    assert copy is not None and len(copy.faces) <= 1000
+    edges = mesh_edges(copy.faces, len(copy.vertices))
+    assert len(copy.vertices) - len(edges.ends) + len(copy.faces) == 2  # still a sphere
+
+
+def test_simplified_mesh_is_none_when_already_small():
+    assert simplified_mesh(clean_mesh(*icosphere(3)), 1280) is None
