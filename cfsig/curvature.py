@@ -26,7 +26,9 @@ from .errors import SolverError
 # Relative residual of the conjugate gradients: the values then agree with a direct solve's to
 # about 1e-9 relative, far below a histogram bin.
 CG_TOLERANCE = 1e-10
-CG_ITERATIONS = 2000
+# About as many iterations as a factorisation costs (benchmarks/descriptors.py stages): a
+# system that needs more is factorised, and so is every larger scale's, worse conditioned.
+CG_ITERATIONS = 150
 
 
 def smoothed_curvature(ops: Operators, scales: tuple[float, ...]) -> np.ndarray:
@@ -57,28 +59,37 @@ def smoothed_curvature(ops: Operators, scales: tuple[float, ...]) -> np.ndarray:
     stiffness = sp.csr_matrix(-ops.laplacian)
     out = np.empty((len(defect), len(scales)))
     guess = defect / ops.vertex_area  # the limit of a vanishing scale
+    hard = np.inf  # the smallest scale the conjugate gradients did not solve
     for j, scale in enumerate(scales):
-        guess = out[:, j] = _diffuse(ops.vertex_area, stiffness, scale * area, defect, guess)
+        system = sp.diags(ops.vertex_area, format="csr") + (scale * area) * stiffness
+        solved = None if scale >= hard else _conjugate_gradients(system, defect, guess)
+        if solved is None:
+            hard = min(hard, scale)
+            solved = _factorised(system, defect)
+        guess = out[:, j] = solved
     out *= area
     if not np.all(np.isfinite(out)):
         raise SolverError("curvature diffusion gave non-finite values")
     return out
 
 
-def _diffuse(
-    mass: np.ndarray, stiffness: sp.csr_matrix, time: float, defect: np.ndarray, guess: np.ndarray
-) -> np.ndarray:
-    """Solve ``(M + time * stiffness) u = defect``, by conjugate gradients when they converge."""
-    system = sp.diags(mass, format="csr") + time * stiffness
+def _conjugate_gradients(
+    system: sp.csr_matrix, rhs: np.ndarray, guess: np.ndarray
+) -> np.ndarray | None:
+    """Solve ``system u = rhs`` by diagonally preconditioned conjugate gradients, or None when
+    they do not converge within `CG_ITERATIONS`."""
     inverse = 1.0 / system.diagonal()
     preconditioner = spla.LinearOperator(system.shape, matvec=lambda r: inverse * r)
+    u, info = spla.cg(
+        system, rhs, x0=guess, rtol=CG_TOLERANCE, atol=0.0, maxiter=CG_ITERATIONS,
+        M=preconditioner,
+    )  # fmt: skip
+    return u if info == 0 else None
+
+
+def _factorised(system: sp.csr_matrix, rhs: np.ndarray) -> np.ndarray:
+    """Solve ``system u = rhs`` by a sparse factorisation, the best installed backend."""
     try:
-        u, info = spla.cg(
-            system, defect, x0=guess, rtol=CG_TOLERANCE, atol=0.0, maxiter=CG_ITERATIONS,
-            M=preconditioner,
-        )  # fmt: skip
-        if info == 0:
-            return u
-        return factorize(system.tocsc(), "auto")(defect)
+        return factorize(system.tocsc(), "auto")(rhs)
     except (RuntimeError, ValueError, ArithmeticError) as exc:
         raise SolverError(f"curvature diffusion failed: {exc}") from None

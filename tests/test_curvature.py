@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from cfsig import cfhks
+from cfsig import cfhks, curvature
 from cfsig.conformal import operators
 from cfsig.curvature import smoothed_curvature
 from cfsig.mesh import clean_mesh
@@ -55,3 +55,12 @@ def test_histograms_weigh_by_area():
     assert hist[0, cfhks.CURVATURE_BINS // 2] == 0.5  # asinh(0) in the middle bin
     assert hist[0, 0] == hist[0, -1] == 0.25  # beyond the range: the end bins
     assert cfhks.curvature_histograms(np.empty((3, 0)), np.ones(3)).shape == (0, 48)
+
+
+def test_conjugate_gradients_agree_with_the_factorisation(monkeypatch):
+    v, f = icosphere(3)
+    ops, iterative = _curvature(v * [1.0, 0.6, 0.4], f)
+    monkeypatch.setattr(curvature, "CG_ITERATIONS", 1)  # every scale falls back to a factorisation
+    direct = smoothed_curvature(ops, SCALES)
+    assert not np.array_equal(iterative, direct)
+    assert np.allclose(iterative, direct, rtol=1e-8, atol=1e-8 * np.abs(direct).max())
