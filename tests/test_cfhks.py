@@ -17,8 +17,8 @@ from tests.helpers import disk, icosphere, open_cylinder, random_rotation, torus
 CFHKS = Params(descriptor="cfhks")
 
 
-def _bumpy(stretch=1.5):
-    v, f = icosphere(3)
+def _bumpy(stretch=1.5, levels=3):
+    v, f = icosphere(levels)
     v = v * [1.0, 0.6, 0.5]
     v[:, 0] += stretch * np.clip(v[:, 0], 0, None) ** 4
     return v, f
@@ -175,10 +175,7 @@ def test_version_3_extends_version_2():
 
 def _fine_bumpy(stretch=1.5):
     """`_bumpy` at 20480 faces: more than version 4's copy."""
-    v, f = icosphere(5)
-    v = v * [1.0, 0.6, 0.5]
-    v[:, 0] += stretch * np.clip(v[:, 0], 0, None) ** 4
-    return v, f
+    return _bumpy(stretch, levels=5)
 
 
 def test_version_4_is_version_3_on_a_mesh_smaller_than_its_copy():
