@@ -48,7 +48,7 @@ from .curvature import smoothed_curvature
 from .errors import SolverError
 from .mesh import Mesh
 from .simplify import simplified_mesh
-from .spectrum import heat_kernel_signature, laplace_spectrum
+from .spectrum import Spectrum, heat_kernel_signature, laplace_spectrum
 
 QUANTILES = 64
 EIGENPAIRS = 30
@@ -186,7 +186,8 @@ def channels(
         Scales of the curvature channel (`Design.scales`).
     coarse : Mesh or None
         A simplified copy of the mesh (`cfsig.simplify.simplified_mesh`) on which the spectrum
-        and heat are computed, with its own factorisation; None computes them with ``cf``'s.
+        and heat are computed, with its own factorisation; None, or a copy that cannot be
+        solved, computes them with ``cf``'s.
 
     Returns
     -------
@@ -203,13 +204,7 @@ def channels(
     """
     ops = cf.operators
     weights = ops.vertex_area / ops.vertex_area.sum()
-    spectrum_ops, solve = ops, cf.solve
-    if coarse is not None:
-        spectrum_ops = operators(coarse)
-        solve = factorize_laplacian(spectrum_ops.laplacian, spectrum_ops.labels)
-    spectrum = laplace_spectrum(
-        spectrum_ops.laplacian, spectrum_ops.vertex_area, spectrum_ops.labels, solve, EIGENPAIRS
-    )
+    spectrum = _spectrum(cf, coarse)
     area = spectrum.area
     scaled = np.log(spectrum.eigenvalues * area)
     scaled = np.concatenate([scaled, np.full(EIGENPAIRS - len(scaled), scaled[-1])])
@@ -222,6 +217,19 @@ def channels(
         "heat": heat,
         "curvature": curvature_histograms(smoothed_curvature(ops, scales), weights),
     }
+
+
+def _spectrum(cf: ConformalFactor, coarse: Mesh | None) -> Spectrum:
+    """The low spectrum of the copy when there is one and it can be solved, else of cf's mesh."""
+    if coarse is not None:
+        ops = operators(coarse)
+        try:
+            solve = factorize_laplacian(ops.laplacian, ops.labels)
+            return laplace_spectrum(ops.laplacian, ops.vertex_area, ops.labels, solve, EIGENPAIRS)
+        except SolverError:
+            pass  # a copy the simplification left unsolvable: the spectrum of the mesh itself
+    ops = cf.operators
+    return laplace_spectrum(ops.laplacian, ops.vertex_area, ops.labels, cf.solve, EIGENPAIRS)
 
 
 def weigh(parts: dict[str, np.ndarray], design: Design) -> np.ndarray:
@@ -294,9 +302,4 @@ def cfhks_vector(cf: ConformalFactor, mesh: Mesh, version: int) -> np.ndarray:
     """
     design = DESIGNS[version]
     coarse = simplified_mesh(mesh, design.coarse) if design.coarse else None
-    if coarse is not None:
-        try:
-            return weigh(channels(cf, design.times, design.scales, coarse), design)
-        except SolverError:
-            pass  # a copy the simplification left unsolvable: the spectrum of the mesh itself
-    return weigh(channels(cf, design.times, design.scales), design)
+    return weigh(channels(cf, design.times, design.scales, coarse), design)

@@ -56,12 +56,12 @@ def smoothed_curvature(ops: Operators, scales: tuple[float, ...]) -> np.ndarray:
     """
     area = float(ops.vertex_area.sum())
     defect = np.where(ops.boundary, 0.0, ops.curvature)
-    stiffness = sp.csr_matrix(-ops.laplacian)
+    mass, stiffness = sp.diags(ops.vertex_area, format="csr"), sp.csr_matrix(-ops.laplacian)
     out = np.empty((len(defect), len(scales)))
     guess = defect / ops.vertex_area  # the limit of a vanishing scale
     hard = np.inf  # the smallest scale the conjugate gradients did not solve
     for j, scale in enumerate(scales):
-        system = sp.diags(ops.vertex_area, format="csr") + (scale * area) * stiffness
+        system = mass + (scale * area) * stiffness
         solved = None if scale >= hard else _conjugate_gradients(system, defect, guess)
         if solved is None:
             hard = min(hard, scale)
