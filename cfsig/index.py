@@ -195,12 +195,15 @@ class IndexReader:
             return params, [SegmentView(f["signatures"], 0, np.zeros(0, np.int64))]
         for attempt in range(_OPEN_ATTEMPTS):
             manifest = read_manifest(self.path)
-            missing = [s for s in manifest.segments if not (self.path / s.file).is_file()]
-            if missing and attempt + 1 < _OPEN_ATTEMPTS:
-                continue  # a compaction replaced them after we read the manifest
-            if missing:
-                raise IndexFileError(f"{self.path}: segment {missing[0].file} is missing")
-            files = [_open_segment(self.path, s) for s in manifest.segments]
+            try:
+                files = _open_segments(self.path, manifest.segments)
+            except IndexFileError:
+                missing = [s for s in manifest.segments if not (self.path / s.file).is_file()]
+                if not missing:
+                    raise
+                if attempt + 1 < _OPEN_ATTEMPTS:
+                    continue  # a compaction replaced them after we read the manifest
+                raise IndexFileError(f"{self.path}: segment {missing[0].file} is missing") from None
             self._files += files
             dead = _dead_rows(manifest.segments, files, self.path)
             views, start = [], 0
@@ -784,7 +787,7 @@ def check_index(path: str | os.PathLike) -> list[str]:
             found.append("file checksum mismatch outside the rows (HDF5 structure)")
         problems += [f"{file}: {p}" for p in found]
     if not problems:
-        files = [_open_segment(path, s) for s in manifest.segments]
+        files = _open_segments(path, manifest.segments)
         try:
             _dead_rows(manifest.segments, files, path)
         except IndexFileError as exc:
@@ -871,6 +874,19 @@ def file_crc(path: Path) -> int:
         while block := f.read(_CRC_BLOCK):
             crc = zlib.crc32(block, crc)
     return crc
+
+
+def _open_segments(folder: Path, segments: tuple[SegmentInfo, ...]) -> list[h5py.File]:
+    """Open every segment a manifest lists, closing those already open if one fails."""
+    files: list[h5py.File] = []
+    try:
+        for info in segments:
+            files.append(_open_segment(folder, info))
+    except BaseException:
+        for f in files:
+            f.close()
+        raise
+    return files
 
 
 def _open_segment(folder: Path, info: SegmentInfo) -> h5py.File:
