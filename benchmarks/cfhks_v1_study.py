@@ -61,7 +61,7 @@ def _channels_of(path: Path) -> dict[str, np.ndarray]:
     """Every channel variant of one mesh."""
     mesh = read_mesh(path)
     cf = conformal_factor(mesh, Params().mollify)
-    out = {"cf": signature_of(cf, mesh, Params())}
+    out = {"cf": signature_of(mesh, cf.operators, Params(), cf)}
     samples = sample_phi(mesh.faces, cf.operators.face_areas, cf.phi, 5 * len(mesh.faces), 0)
     out["phi_sampled"] = np.quantile(np.concatenate([samples, cf.phi]), (np.arange(Q) + 0.5) / Q)
     area = cf.operators.vertex_area.sum()
@@ -244,7 +244,7 @@ def cost(args: argparse.Namespace) -> None:
         start = time.process_time()
         mesh = read_mesh(path)
         cf = conformal_factor(mesh, Params().mollify)
-        signature_of(cf, mesh, Params())
+        signature_of(mesh, cf.operators, Params(), cf)
         times["cf"].append(time.process_time() - start)
         for k in PAIRS:
             start = time.process_time()

@@ -61,7 +61,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from cfsig import cfhks
-from cfsig.conformal import conformal_factor, factorize
+from cfsig.conformal import conformal_factor, factorize, operators
 from cfsig.curvature import smoothed_curvature
 from cfsig.measures import RetrievalReport, evaluate_distances
 from cfsig.mesh import read_mesh
@@ -124,7 +124,8 @@ def _measure_one(path: Path) -> dict:
     row["ShapeDNA"] = shapedna(path)
     row["ShapeDNA s"] = time.process_time() - start
     cf = conformal_factor(repair_mesh(read_mesh(path)), Params().mollify)
-    row.update(cfhks.channels(cf, V2.times, LADDER))
+    spectrum = cfhks.spectrum_of(cf.operators, solve=cf.solve)
+    row.update(cfhks.channels(cf.operators, spectrum, replace(V2, scales=LADDER), cf.phi))
     return row
 
 
@@ -440,17 +441,17 @@ def _coarse_one(item: tuple[Path, int]) -> tuple[np.ndarray, float, np.ndarray]:
     design = replace(cfhks.DESIGNS[4], coarse=faces)
     start = time.process_time()
     mesh = repair_mesh(read_mesh(path))
-    cf = conformal_factor(mesh, Params().mollify)
+    ops = operators(mesh, Params().mollify)
     copy = simplified_mesh(mesh, faces)
-    vector = cfhks.weigh(cfhks.channels(cf, design.times, design.scales, copy), design)
+    vector = cfhks.weigh(cfhks.channels(ops, cfhks.spectrum_of(ops, copy), design), design)
     seconds = time.process_time() - start
     if copy is None:
         return vector, seconds, vector
-    on_copy = conformal_factor(copy, Params().mollify)
+    on_copy = operators(copy, Params().mollify)
     return (
         vector,
         seconds,
-        cfhks.weigh(cfhks.channels(on_copy, design.times, design.scales), design),
+        cfhks.weigh(cfhks.channels(on_copy, cfhks.spectrum_of(on_copy), design), design),
     )
 
 
@@ -516,9 +517,15 @@ def _stages_one(path: Path) -> dict[str, float]:
         return np.array([factorize(sp.csc_matrix(a), "auto")(defect) for a in systems]).T * area
 
     exact = timed("curvature, four factorisations", factorised)
-    timed("spectrum and heat, full mesh", lambda: cfhks.channels(cf, design.times))
+    heat = replace(design, scales=())
+    timed(
+        "spectrum and heat, full mesh",
+        lambda: cfhks.channels(ops, cfhks.spectrum_of(ops, solve=cf.solve), heat),
+    )
     copy = timed("simplified copy", lambda: simplified_mesh(mesh, design.coarse))
-    timed("spectrum and heat, copy", lambda: cfhks.channels(cf, design.times, (), copy))
+    timed(
+        "spectrum and heat, copy", lambda: cfhks.channels(ops, cfhks.spectrum_of(ops, copy), heat)
+    )
     seconds["difference"] = float(np.abs(values - exact).max() / np.abs(exact).max())
     return seconds
 

@@ -26,7 +26,7 @@ from cfsig.signature import compute_signature, signature_of
 def bare(mesh: Mesh, params: Params) -> tuple[np.ndarray, np.ndarray]:
     """Phi and signature without the repair stage: the pipeline before it existed."""
     cf = conformal_factor(mesh, params.mollify)
-    return cf.phi, signature_of(cf, mesh, params)
+    return cf.phi, signature_of(mesh, cf.operators, params, cf)
 
 
 def staged(mesh: Mesh, params: Params) -> tuple[np.ndarray, np.ndarray]:

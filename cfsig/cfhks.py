@@ -1,8 +1,8 @@
 """The ``cfhks`` descriptor: phi, the spectrum, heat kernel signatures and curvature at scales.
 
 Up to four channels, all invariant to rigid motion and scale and all (nearly) invariant to
-isometric bending, computed from the one factorisation that the conformal factor's solve makes
-(see docs/descriptors.md for what each captures and how every constant here was chosen):
+isometric bending (see docs/descriptors.md for what each captures and how every constant here
+was chosen):
 
 - ``phi``: the distribution of the conformal factor over the surface, as ``QUANTILES``
   area-weighted quantiles; two distributions are compared by the 1-Wasserstein distance, the
@@ -15,8 +15,8 @@ isometric bending, computed from the one factorisation that the conformal factor
   1-Wasserstein distance per time.
 - ``curvature``: for each scale ``s`` of the version's ``scales``, the area-weighted histogram
   of the angle defect smoothed by heat diffusion for ``s * area`` (`cfsig.curvature`), on
-  ``asinh(value / 10)`` in ``CURVATURE_BINS`` bins; L1 distance per scale. It needs no
-  eigenproblem, only one factorisation per scale.
+  ``asinh(value / 10)`` in the version's ``bins``; L1 distance per scale. It needs no
+  eigenproblem, only conjugate gradients.
 
 The distance between two meshes is the sum over channels of the channel's distance divided by
 a constant of the version (`Design`): a median of that distance over the pairs of unlabelled
@@ -35,16 +35,21 @@ Versions (`Params.version`; an index stores its own, and a query recomputes with
 4. Version 3 with the spectrum and the heat kernel signature computed on a copy of the mesh
    simplified to ``coarse`` faces (`cfsig.simplify`), at a fraction of the eigenproblem's cost;
    phi and the curvature stay on the full mesh, bit for bit version 3's.
+5. Version 4 for less work: the curvature's conjugate gradients stopped at 1e-5, in 49 bins.
+
+Only version 1's vector holds phi, so only version 1 solves for it (`solves_phi`); the others
+factorise the Laplacian of the mesh, or of its copy, for the spectrum alone.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .conformal import ConformalFactor, factorize_laplacian, operators
-from .curvature import smoothed_curvature
+from .conformal import ConformalFactor, Operators, factorize_laplacian, operators
+from .curvature import CG_TOLERANCE, smoothed_curvature
 from .errors import SolverError
 from .mesh import Mesh
 from .simplify import simplified_mesh
@@ -52,7 +57,6 @@ from .spectrum import Spectrum, heat_kernel_signature, laplace_spectrum
 
 QUANTILES = 64
 EIGENPAIRS = 30
-CURVATURE_BINS = 48
 CURVATURE_RANGE = 6.0  # bins span asinh(value / CURVATURE_UNIT) in [-6, 6]: +-2000 in value
 CURVATURE_UNIT = 10.0  # about the sphere's 4 pi: the histogram is linear below, logarithmic above
 
@@ -79,6 +83,10 @@ class Design:
     coarse : int
         Faces of the simplified copy on which the spectrum and heat are computed; 0 computes
         them on the mesh itself.
+    bins : int
+        Bins of each curvature histogram.
+    tolerance : float
+        Relative residual of the curvature's conjugate gradients.
     """
 
     times: tuple[float, ...]
@@ -88,6 +96,8 @@ class Design:
     scales: tuple[float, ...] = ()
     curvature: float = 1.0
     coarse: int = 0
+    bins: int = 48
+    tolerance: float = CG_TOLERANCE
 
     @property
     def length(self) -> int:
@@ -96,7 +106,7 @@ class Design:
             (self.phi is not None) * QUANTILES
             + EIGENPAIRS
             + QUANTILES * len(self.times)
-            + CURVATURE_BINS * len(self.scales)
+            + self.bins * len(self.scales)
         )
 
 
@@ -118,6 +128,11 @@ DESIGNS = {
     3: _V3,
     4: replace(_V3, coarse=4000),
 }
+# Version 5: version 4 for less work, its channels' meaning unchanged (docs/method.md, section
+# 13): the curvature's conjugate gradients stop at a relative residual of 1e-5, which moves a
+# histogram by about 1e-3 of its mass, and 49 bins put zero curvature (flat parts) in the
+# middle of a bin rather than on an edge, where round-off would decide its side.
+DESIGNS[5] = replace(DESIGNS[4], bins=49, tolerance=1e-5)
 
 
 def weighted_quantiles(values: np.ndarray, weights: np.ndarray, count: int) -> np.ndarray:
@@ -144,7 +159,7 @@ def weighted_quantiles(values: np.ndarray, weights: np.ndarray, count: int) -> n
     return values[order][picked]
 
 
-def curvature_histograms(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
+def curvature_histograms(values: np.ndarray, weights: np.ndarray, bins: int) -> np.ndarray:
     """Histograms of curvature at scales, the ``curvature`` channel.
 
     Parameters
@@ -153,83 +168,114 @@ def curvature_histograms(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
         `cfsig.curvature.smoothed_curvature` at k scales, dimensionless.
     weights : (n,) float64
         Non-negative vertex weights (areas) with a positive sum.
+    bins : int
+        Bins per histogram (`Design.bins`).
 
     Returns
     -------
-    histograms : (k, CURVATURE_BINS) float64
+    histograms : (k, bins) float64
         Per scale, the fraction of the weight in each bin of ``asinh(value / CURVATURE_UNIT)``
         on [-CURVATURE_RANGE, CURVATURE_RANGE], values beyond counted in the end bins.
     """
     position = np.arcsinh(values / CURVATURE_UNIT) + CURVATURE_RANGE
-    position *= CURVATURE_BINS / (2 * CURVATURE_RANGE)
-    bins = np.clip(position, 0, CURVATURE_BINS - 1).astype(np.intp)
+    position *= bins / (2 * CURVATURE_RANGE)
+    index = np.clip(position, 0, bins - 1).astype(np.intp)
     fractions = weights / weights.sum()
-    counts = [np.bincount(b, weights=fractions, minlength=CURVATURE_BINS) for b in bins.T]
-    return np.array(counts).reshape(values.shape[1], CURVATURE_BINS)
+    counts = [np.bincount(b, weights=fractions, minlength=bins) for b in index.T]
+    return np.array(counts).reshape(values.shape[1], bins)
 
 
 def channels(
-    cf: ConformalFactor,
-    times: tuple[float, ...],
-    scales: tuple[float, ...] = (),
-    coarse: Mesh | None = None,
+    ops: Operators, spectrum: Spectrum, design: Design, phi: np.ndarray | None = None
 ) -> dict[str, np.ndarray]:
-    """The unweighted channels of a mesh whose conformal factor is known.
+    """The unweighted channels of a mesh.
 
     Parameters
     ----------
-    cf : ConformalFactor
-        Result of `conformal.conformal_factor`, whose factorisation is reused.
-    times : tuple of float
-        Diffusion times of the heat channel divided by the surface area (`Design.times`).
-    scales : tuple of float
-        Scales of the curvature channel (`Design.scales`).
-    coarse : Mesh or None
-        A simplified copy of the mesh (`cfsig.simplify.simplified_mesh`) on which the spectrum
-        and heat are computed, with its own factorisation; None, or a copy that cannot be
-        solved, computes them with ``cf``'s.
+    ops : Operators
+        The mesh's operators (`cfsig.conformal.operators`).
+    spectrum : Spectrum
+        Its low spectrum, or its simplified copy's (`spectrum_of`).
+    design : Design
+        Gives the heat channel's times and the curvature channel's scales, bins and tolerance.
+    phi : (n,) float64 or None
+        The conformal factor, for the versions whose vector holds it.
 
     Returns
     -------
     channels : dict
-        ``"phi"``: (QUANTILES,) quantiles of phi, dimensionless. ``"spectrum"``: (EIGENPAIRS,)
-        ``log(lambda_i * area)``; a mesh with fewer nonzero eigenvalues repeats its largest.
-        ``"heat"``: (len(times), QUANTILES) quantiles of ``log(area * h_t)``.
-        ``"curvature"``: (len(scales), CURVATURE_BINS) `curvature_histograms`.
+        ``"spectrum"``: (EIGENPAIRS,) ``log(lambda_i * area)``; a mesh with fewer nonzero
+        eigenvalues repeats its largest. ``"heat"``: (len(times), QUANTILES) quantiles of
+        ``log(area * h_t)``. ``"curvature"``: (len(scales), bins) `curvature_histograms`.
+        ``"phi"``: (QUANTILES,) quantiles of phi, dimensionless, when ``phi`` is given.
 
     Raises
     ------
     SolverError
-        The eigenvalue iteration or a curvature diffusion failed.
+        A curvature diffusion failed.
     """
-    ops = cf.operators
     weights = ops.vertex_area / ops.vertex_area.sum()
-    spectrum = _spectrum(cf, coarse)
     area = spectrum.area
     scaled = np.log(spectrum.eigenvalues * area)
     scaled = np.concatenate([scaled, np.full(EIGENPAIRS - len(scaled), scaled[-1])])
-    hks = heat_kernel_signature(spectrum, np.asarray(times) * area)
+    hks = heat_kernel_signature(spectrum, np.asarray(design.times) * area)
     heat_weights = spectrum.vertex_area / area
     heat = np.array([weighted_quantiles(np.log(area * h), heat_weights, QUANTILES) for h in hks.T])
-    return {
-        "phi": weighted_quantiles(cf.phi, weights, QUANTILES),
+    curvature = smoothed_curvature(ops, design.scales, design.tolerance)
+    parts = {
         "spectrum": scaled,
         "heat": heat,
-        "curvature": curvature_histograms(smoothed_curvature(ops, scales), weights),
+        "curvature": curvature_histograms(curvature, weights, design.bins),
     }
+    if phi is not None:
+        parts["phi"] = weighted_quantiles(phi, weights, QUANTILES)
+    return parts
 
 
-def _spectrum(cf: ConformalFactor, coarse: Mesh | None) -> Spectrum:
-    """The low spectrum of the copy when there is one and it can be solved, else of cf's mesh."""
+def spectrum_of(
+    ops: Operators,
+    coarse: Mesh | None = None,
+    solve: Callable[[np.ndarray], np.ndarray] | None = None,
+    solver: str = "auto",
+) -> Spectrum:
+    """The `EIGENPAIRS` smallest nonzero eigenpairs of a mesh, or of its simplified copy.
+
+    Parameters
+    ----------
+    ops : Operators
+        The mesh's operators.
+    coarse : Mesh or None
+        A simplified copy (`cfsig.simplify.simplified_mesh`), solved with its own
+        factorisation; None, or a copy that cannot be solved, takes the mesh itself.
+    solve : callable or None
+        The mesh's factorised Laplacian when it is known (`ConformalFactor.solve`); None
+        factorises it when it is needed.
+    solver : {"auto", "cholmod", "eigen", "scipy"}
+        Sparse solver backend of the factorisations made here.
+
+    Returns
+    -------
+    spectrum : Spectrum
+
+    Raises
+    ------
+    SolverError
+        The mesh's factorisation or eigenvalue iteration failed.
+    """
     if coarse is not None:
-        ops = operators(coarse)
+        copy = operators(coarse)
         try:
-            solve = factorize_laplacian(ops.laplacian, ops.labels)
-            return laplace_spectrum(ops.laplacian, ops.vertex_area, ops.labels, solve, EIGENPAIRS)
+            return _eigenpairs(copy, factorize_laplacian(copy.laplacian, copy.labels, solver))
         except SolverError:
             pass  # a copy the simplification left unsolvable: the spectrum of the mesh itself
-    ops = cf.operators
-    return laplace_spectrum(ops.laplacian, ops.vertex_area, ops.labels, cf.solve, EIGENPAIRS)
+    if solve is None:
+        solve = factorize_laplacian(ops.laplacian, ops.labels, solver)
+    return _eigenpairs(ops, solve)
+
+
+def _eigenpairs(ops: Operators, solve: Callable[[np.ndarray], np.ndarray]) -> Spectrum:
+    """`laplace_spectrum` of a mesh's operators with `EIGENPAIRS` pairs."""
+    return laplace_spectrum(ops.laplacian, ops.vertex_area, ops.labels, solve, EIGENPAIRS)
 
 
 def weigh(parts: dict[str, np.ndarray], design: Design) -> np.ndarray:
@@ -265,30 +311,41 @@ def weigh_curvature(histograms: np.ndarray, design: Design) -> np.ndarray:
 
     Parameters
     ----------
-    histograms : (len(design.scales), CURVATURE_BINS) float64
+    histograms : (len(design.scales), design.bins) float64
         `curvature_histograms`.
     design : Design
         The version's divisors.
 
     Returns
     -------
-    entries : (len(design.scales) * CURVATURE_BINS,) float64
-        Each histogram entry divided by ``CURVATURE_BINS * design.curvature``, scale by scale.
+    entries : (len(design.scales) * design.bins,) float64
+        Each histogram entry divided by ``design.bins * design.curvature``, scale by scale.
     """
-    return (histograms / (CURVATURE_BINS * design.curvature)).ravel()
+    return (histograms / (design.bins * design.curvature)).ravel()
 
 
-def cfhks_vector(cf: ConformalFactor, mesh: Mesh, version: int) -> np.ndarray:
-    """The ``cfhks`` descriptor of a mesh whose conformal factor is known.
+def cfhks_vector(
+    mesh: Mesh,
+    ops: Operators,
+    version: int,
+    cf: ConformalFactor | None = None,
+    solver: str = "auto",
+) -> np.ndarray:
+    """The ``cfhks`` descriptor of a mesh.
 
     Parameters
     ----------
-    cf : ConformalFactor
-        Result of `conformal.conformal_factor` on ``mesh``.
     mesh : Mesh
         The mesh, simplified for the spectrum when the version has a ``coarse`` copy.
+    ops : Operators
+        Its operators (`cfsig.conformal.operators`).
     version : int
         A key of `DESIGNS`.
+    cf : ConformalFactor or None
+        Its conformal factor (`conformal.conformal_factor`), needed when the version's vector
+        holds phi (`solves_phi`); its factorisation is reused for the spectrum.
+    solver : {"auto", "cholmod", "eigen", "scipy"}
+        Sparse solver backend of the factorisations made here.
 
     Returns
     -------
@@ -298,8 +355,29 @@ def cfhks_vector(cf: ConformalFactor, mesh: Mesh, version: int) -> np.ndarray:
     Raises
     ------
     SolverError
-        The eigenvalue iteration failed.
+        A factorisation, the eigenvalue iteration or a curvature diffusion failed.
+    ValueError
+        The version needs phi and ``cf`` is None.
     """
     design = DESIGNS[version]
+    if solves_phi(version) and cf is None:
+        raise ValueError(f"cfhks version {version} holds phi: give its conformal factor")
     coarse = simplified_mesh(mesh, design.coarse) if design.coarse else None
-    return weigh(channels(cf, design.times, design.scales, coarse), design)
+    spectrum = spectrum_of(ops, coarse, None if cf is None else cf.solve, solver)
+    return weigh(channels(ops, spectrum, design, None if cf is None else cf.phi), design)
+
+
+def solves_phi(version: int) -> bool:
+    """Whether a version's vector holds phi, so that computing it needs the conformal solve.
+
+    Parameters
+    ----------
+    version : int
+        A key of `DESIGNS`.
+
+    Returns
+    -------
+    solves : bool
+        True for version 1 only: from version 2 on, phi's weight is 0 (docs/descriptors.md).
+    """
+    return DESIGNS[version].phi is not None

@@ -184,7 +184,7 @@ def compute(
     drawn: list = []
     for path in meshes:
         try:
-            mesh, sig = mesh_and_signature(path, params, solver)
+            mesh, sig = mesh_and_signature(path, params, solver, phi=True)
         except CfsigError as exc:
             failed.append(str(exc))
             rows.append({"file": str(path), "error": str(exc)})
@@ -196,6 +196,7 @@ def compute(
         row = _describe(path, sig)
         rows.append(row)
         if save:
+            assert sig.phi is not None  # solved for compute (phi=True)
             save.mkdir(parents=True, exist_ok=True)
             np.savez(
                 save / f"{path.stem}.npz",

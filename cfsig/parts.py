@@ -20,7 +20,7 @@ import os
 
 import numpy as np
 
-from .cfhks import CURVATURE_BINS, DESIGNS, curvature_histograms, weigh_curvature
+from .cfhks import DESIGNS, curvature_histograms, weigh_curvature
 from .conformal import Operators, operators
 from .curvature import smoothed_curvature
 from .errors import MeshError, PartialError, SolverError
@@ -43,7 +43,7 @@ def curvature_columns(params: Params) -> slice:
     Returns
     -------
     columns : slice
-        The last ``CURVATURE_BINS * len(scales)`` columns.
+        The last ``bins * len(scales)`` columns of the version's design.
 
     Raises
     ------
@@ -57,7 +57,7 @@ def curvature_columns(params: Params) -> slice:
             f"index holds {params.descriptor} version {params.version}: rebuild it with "
             f"'cfsig index FOLDER -o NEW --descriptor cfhks'"
         )
-    return slice(design.length - CURVATURE_BINS * len(design.scales), design.length)
+    return slice(design.length - design.bins * len(design.scales), design.length)
 
 
 def partial_vectors(ops: Operators, params: Params) -> np.ndarray:
@@ -72,7 +72,7 @@ def partial_vectors(ops: Operators, params: Params) -> np.ndarray:
 
     Returns
     -------
-    vectors : (len(SHARES), CURVATURE_BINS * len(scales)) float64
+    vectors : (len(SHARES), bins * len(scales)) float64
         Comparable by L1 with the `curvature_columns` of the index's signatures.
 
     Raises
@@ -89,11 +89,14 @@ def partial_vectors(ops: Operators, params: Params) -> np.ndarray:
     scales = np.asarray(design.scales)[None, :] / shares[:, None]  # (shares, scales)
     # Quadrupling scales over shares a factor 2 apart in area meet: each distinct one once.
     distinct, where = np.unique(scales, return_inverse=True)
-    values = smoothed_curvature(ops, tuple(distinct))[:, where.reshape(scales.shape)]
+    values = smoothed_curvature(ops, tuple(distinct), design.tolerance)
+    values = values[:, where.reshape(scales.shape)]
     values /= shares[:, None]
     return np.array(
         [
-            weigh_curvature(curvature_histograms(values[:, i], ops.vertex_area), design)
+            weigh_curvature(
+                curvature_histograms(values[:, i], ops.vertex_area, design.bins), design
+            )
             for i in range(len(SHARES))
         ]
     )

@@ -1,8 +1,9 @@
 """The signature: a histogram of phi sampled uniformly over the surface (paper section 2.3).
 
 It is the ``cf`` descriptor; `signature_of` also makes the other descriptors of `DESCRIPTORS`
-(docs/descriptors.md) from the same conformal factor. Every descriptor is a vector whose L1
-distance is the descriptor's distance.
+(docs/descriptors.md). Every descriptor is a vector whose L1 distance is the descriptor's
+distance. The conformal factor is solved when the descriptor's vector holds it (`needs_phi`) or
+when a caller asks for it.
 """
 
 from __future__ import annotations
@@ -14,8 +15,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .cfhks import cfhks_vector
-from .conformal import ConformalFactor, conformal_factor
+from .cfhks import cfhks_vector, solves_phi
+from .conformal import ConformalFactor, Operators, conformal_factor, operators
 from .errors import MeshError, SolverError
 from .mesh import Mesh, parse_mesh, read_bytes
 from .params import Params
@@ -31,12 +32,12 @@ class Signature:
     vector : (signature_length(params),) float64
         The signature vector: for ``cf`` the histogram of phi, summing to 1; for another
         descriptor its vector (`signature_of`).
-    phi : (n,) float64
-        Conformal factor per vertex.
+    phi : (n,) float64 or None
+        Conformal factor per vertex; None when it was not solved (`needs_phi`).
     n_vertices, n_faces, n_components : int
         Size of the mesh after repairs.
     curvature_error : float
-        Paper section 3.4, in units of pi.
+        Paper section 3.4, in units of pi; NaN when phi was not solved.
     repairs : tuple of str
         Repairs made on reading and by the repair stage, in words.
     route : str
@@ -49,7 +50,7 @@ class Signature:
     """
 
     vector: np.ndarray
-    phi: np.ndarray
+    phi: np.ndarray | None
     n_vertices: int
     n_faces: int
     n_components: int
@@ -61,7 +62,9 @@ class Signature:
 
     @property
     def phi_range(self) -> tuple[float, float]:
-        """The smallest and largest phi."""
+        """The smallest and largest phi; NaN when phi was not solved."""
+        if self.phi is None:
+            return float("nan"), float("nan")
         return float(self.phi.min()), float(self.phi.max())
 
 
@@ -136,17 +139,43 @@ def histogram(values: np.ndarray, params: Params) -> np.ndarray:
     return np.bincount(index, minlength=params.bins) / len(values)
 
 
-def signature_of(cf: ConformalFactor, mesh: Mesh, params: Params) -> np.ndarray:
-    """The signature of a mesh whose conformal factor is known, for ``params.descriptor``.
+def needs_phi(params: Params) -> bool:
+    """Whether the signatures that ``params`` make hold the conformal factor.
 
     Parameters
     ----------
-    cf : ConformalFactor
-        Result of `conformal_factor`.
-    mesh : Mesh
-        The mesh ``cf`` was solved on.
     params : Params
         Signature parameters.
+
+    Returns
+    -------
+    needs : bool
+        True for ``cf`` and ``cfhks`` version 1 (`cfhks.solves_phi`).
+    """
+    return params.descriptor == "cf" or solves_phi(params.version or 0)
+
+
+def signature_of(
+    mesh: Mesh,
+    ops: Operators,
+    params: Params,
+    cf: ConformalFactor | None = None,
+    solver: str = "auto",
+) -> np.ndarray:
+    """The signature vector of a mesh, for ``params.descriptor``.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The mesh.
+    ops : Operators
+        Its operators (`conformal.operators`).
+    params : Params
+        Signature parameters.
+    cf : ConformalFactor or None
+        Its conformal factor (`conformal_factor`), needed when `needs_phi`.
+    solver : {"auto", "cholmod", "eigen", "scipy"}
+        Sparse solver backend of the factorisations ``cfhks`` makes.
 
     Returns
     -------
@@ -157,23 +186,29 @@ def signature_of(cf: ConformalFactor, mesh: Mesh, params: Params) -> np.ndarray:
     Raises
     ------
     SolverError
-        ``cfhks`` only: the eigenvalue iteration failed.
+        ``cfhks`` only: a factorisation, the eigenvalue iteration or a diffusion failed.
+    ValueError
+        ``cf`` is None and `needs_phi`.
     """
     if params.descriptor == "cfhks":
         assert params.version is not None  # resolved by Params.__post_init__
-        return cfhks_vector(cf, mesh, params.version)
+        return cfhks_vector(mesh, ops, params.version, cf, solver)
+    if cf is None:
+        raise ValueError("the cf descriptor is a histogram of phi: give its conformal factor")
     phi = cf.phi
     if params.normalize:
         span = np.ptp(phi)
         phi = (phi - phi.min()) / span if span > 0 else np.zeros_like(phi)
     faces = mesh.faces
     samples = sample_phi(
-        faces, cf.operators.face_areas, phi, params.samples_per_face * len(faces), params.seed
+        faces, ops.face_areas, phi, params.samples_per_face * len(faces), params.seed
     )
     return histogram(np.concatenate([samples, phi]), params)
 
 
-def compute_signature(mesh: Mesh, params: Params, solver: str = "auto") -> Signature:
+def compute_signature(
+    mesh: Mesh, params: Params, solver: str = "auto", phi: bool = False
+) -> Signature:
     """Repair, conformal factor and signature of an in-memory mesh.
 
     Parameters
@@ -185,6 +220,8 @@ def compute_signature(mesh: Mesh, params: Params, solver: str = "auto") -> Signa
         Signature parameters.
     solver : {"auto", "cholmod", "eigen", "scipy"}
         Sparse solver backend.
+    phi : bool
+        Solve for the conformal factor even when the descriptor does not need it.
 
     Returns
     -------
@@ -197,25 +234,30 @@ def compute_signature(mesh: Mesh, params: Params, solver: str = "auto") -> Signa
     SolverError, MissingDependencyError
         As `conformal_factor` and `signature_of`.
     """
-    return _repair_and_sign(mesh, params, solver)[1]
+    return _repair_and_sign(mesh, params, solver, phi)[1]
 
 
-def _repair_and_sign(mesh: Mesh, params: Params, solver: str) -> tuple[Mesh, Signature]:
+def _repair_and_sign(mesh: Mesh, params: Params, solver: str, phi: bool) -> tuple[Mesh, Signature]:
     """`compute_signature`, also returning the repaired mesh that phi lives on."""
     start = time.perf_counter()
     mesh = repair_mesh(mesh, params.repair)
-    cf = conformal_factor(mesh, params.mollify, solver)
-    hist = signature_of(cf, mesh, params)
+    cf = None
+    if phi or needs_phi(params):
+        cf = conformal_factor(mesh, params.mollify, solver)
+        ops = cf.operators
+    else:
+        ops = operators(mesh, params.mollify)
+    vector = signature_of(mesh, ops, params, cf, solver)
     repairs = mesh.repairs
-    if cf.operators.mollified > 0:
-        repairs += (f"mollified degenerate triangles (edges +{cf.operators.mollified:.3g})",)
+    if ops.mollified > 0:
+        repairs += (f"mollified degenerate triangles (edges +{ops.mollified:.3g})",)
     return mesh, Signature(
-        hist,
-        cf.phi,
+        vector,
+        None if cf is None else cf.phi,
         len(mesh.vertices),
         len(mesh.faces),
-        cf.operators.n_components,
-        cf.curvature_error,
+        ops.n_components,
+        float("nan") if cf is None else cf.curvature_error,
         repairs,
         mesh.route,
         time.perf_counter() - start,
@@ -248,7 +290,7 @@ def signature_file(path: str | os.PathLike, params: Params, solver: str = "auto"
 
 
 def mesh_and_signature(
-    path: str | os.PathLike, params: Params, solver: str = "auto"
+    path: str | os.PathLike, params: Params, solver: str = "auto", phi: bool = False
 ) -> tuple[Mesh, Signature]:
     """Read a mesh file and compute its signature, keeping the mesh (e.g. to draw phi on it).
 
@@ -260,12 +302,14 @@ def mesh_and_signature(
         Signature parameters.
     solver : {"auto", "cholmod", "eigen", "scipy"}
         Sparse solver backend.
+    phi : bool
+        Solve for the conformal factor even when the descriptor does not need it.
 
     Returns
     -------
     mesh : Mesh
-        The mesh as read and through the repair stage; ``signature.phi`` has one value per
-        vertex of it.
+        The mesh as read and through the repair stage; ``signature.phi``, when solved, has one
+        value per vertex of it.
     signature : Signature
         As `signature_file` returns.
 
@@ -278,7 +322,7 @@ def mesh_and_signature(
     data = read_bytes(path)
     mesh = parse_mesh(data, path)
     try:
-        mesh, sig = _repair_and_sign(mesh, params, solver)
+        mesh, sig = _repair_and_sign(mesh, params, solver, phi)
     except MeshError as exc:  # its subclasses too (a stage past its limits)
         raise type(exc)(f"{path}: {exc}") from None
     except SolverError as exc:

@@ -1,4 +1,5 @@
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -7,11 +8,12 @@ from click.testing import CliRunner
 from cfsig import cfhks
 from cfsig.cli import main
 from cfsig.conformal import conformal_factor
+from cfsig.curvature import smoothed_curvature
 from cfsig.errors import SolverError
 from cfsig.index import IndexReader, IndexWriter
 from cfsig.mesh import clean_mesh
 from cfsig.params import VERSIONS, Params, signature_length
-from cfsig.signature import compute_signature
+from cfsig.signature import compute_signature, needs_phi
 from tests.helpers import disk, icosphere, open_cylinder, random_rotation, torus, write_off
 
 CFHKS = Params(descriptor="cfhks")
@@ -37,9 +39,10 @@ def test_weighted_quantiles():
 def test_length_and_channels(version):
     v, f = _bumpy()
     design = cfhks.DESIGNS[version]
-    parts = cfhks.channels(conformal_factor(clean_mesh(v, f)), design.times, design.scales)
+    cf = conformal_factor(clean_mesh(v, f))
+    parts = cfhks.channels(cf.operators, cfhks.spectrum_of(cf.operators), design, cf.phi)
     assert parts["phi"].shape == (cfhks.QUANTILES,)
-    assert parts["curvature"].shape == (len(design.scales), cfhks.CURVATURE_BINS)
+    assert parts["curvature"].shape == (len(design.scales), design.bins)
     assert np.allclose(parts["curvature"].sum(axis=1), 1.0)
     assert parts["spectrum"].shape == (cfhks.EIGENPAIRS,)
     assert parts["heat"].shape == (len(design.times), cfhks.QUANTILES)
@@ -170,7 +173,7 @@ def test_version_3_extends_version_2():
     v2 = compute_signature(mesh, Params(descriptor="cfhks", version=2)).vector
     v3 = compute_signature(mesh, Params(descriptor="cfhks", version=3)).vector
     assert np.array_equal(v3[: len(v2)], v2)
-    assert len(v3) == len(v2) + len(cfhks.DESIGNS[3].scales) * cfhks.CURVATURE_BINS
+    assert len(v3) == len(v2) + len(cfhks.DESIGNS[3].scales) * cfhks.DESIGNS[3].bins
 
 
 def _fine_bumpy(stretch=1.5):
@@ -178,43 +181,81 @@ def _fine_bumpy(stretch=1.5):
     return _bumpy(stretch, levels=5)
 
 
+V4 = Params(descriptor="cfhks", version=4)
+
+
 def test_version_4_is_version_3_on_a_mesh_smaller_than_its_copy():
     mesh = clean_mesh(*_bumpy())
     assert len(mesh.faces) <= cfhks.DESIGNS[4].coarse
     v3 = compute_signature(mesh, Params(descriptor="cfhks", version=3)).vector
-    assert np.array_equal(compute_signature(mesh, CFHKS).vector, v3)
+    assert np.array_equal(compute_signature(mesh, V4).vector, v3)
 
 
 def test_version_4_takes_only_the_spectrum_and_heat_from_the_copy():
     v, f = _fine_bumpy()
     mesh = clean_mesh(v, f)
     v3 = compute_signature(mesh, Params(descriptor="cfhks", version=3)).vector
-    v4 = compute_signature(mesh, CFHKS).vector
-    curvature = cfhks.CURVATURE_BINS * len(cfhks.DESIGNS[4].scales)
+    v4 = compute_signature(mesh, V4).vector
+    curvature = cfhks.DESIGNS[4].bins * len(cfhks.DESIGNS[4].scales)
     assert np.array_equal(v4[-curvature:], v3[-curvature:])
     assert not np.array_equal(v4, v3)
-    other = compute_signature(clean_mesh(*_fine_bumpy(stretch=4.0)), CFHKS).vector
+    other = compute_signature(clean_mesh(*_fine_bumpy(stretch=4.0)), V4).vector
     # the copy's spectrum and heat stand for the mesh's: far closer than another shape's
     assert np.abs(v4 - v3).sum() < 0.25 * np.abs(other - v4).sum()
 
 
-def test_version_4_is_nearly_invariant_to_rigid_motion_and_scale():
+@pytest.mark.parametrize("version", [4, 5])
+def test_the_copy_is_nearly_invariant_to_rigid_motion_and_scale(version):
+    params = Params(descriptor="cfhks", version=version)
     v, f = _fine_bumpy()
-    base = compute_signature(clean_mesh(v, f), CFHKS).vector
+    base = compute_signature(clean_mesh(v, f), params).vector
     moved = compute_signature(
-        clean_mesh(0.2 * v @ random_rotation(7).T + [5.0, 1.0, -2.0], f), CFHKS
+        clean_mesh(0.2 * v @ random_rotation(7).T + [5.0, 1.0, -2.0], f), params
     )
-    other = compute_signature(clean_mesh(*_fine_bumpy(stretch=4.0)), CFHKS).vector
+    other = compute_signature(clean_mesh(*_fine_bumpy(stretch=4.0)), params).vector
     # the simplification's collapse order may differ in the last bits, so not exactly
     assert np.abs(moved.vector - base).sum() < 0.05 * np.abs(other - base).sum()
 
 
-def test_version_4_falls_back_to_the_mesh_when_its_copy_fails(monkeypatch):
+@pytest.mark.parametrize("version", [4, 5])
+def test_the_copy_falls_back_to_the_mesh_when_it_fails(monkeypatch, version):
     mesh = clean_mesh(*_fine_bumpy())
-    v3 = compute_signature(mesh, Params(descriptor="cfhks", version=3)).vector
+    params = Params(descriptor="cfhks", version=version)
+    on_mesh = compute_signature(mesh, Params(descriptor="cfhks", version=3)).vector
+    copy_factorisation = cfhks.factorize_laplacian
 
-    def fails(*args, **kwargs):
-        raise SolverError("the copy's Laplacian is singular")
+    def fails(laplacian, labels, solver="auto"):
+        if laplacian.shape[0] < len(mesh.vertices):
+            raise SolverError("the copy's Laplacian is singular")
+        return copy_factorisation(laplacian, labels, solver)
 
-    monkeypatch.setattr(cfhks, "factorize_laplacian", fails)  # only the copy's factorisation
-    assert np.array_equal(compute_signature(mesh, CFHKS).vector, v3)
+    monkeypatch.setattr(cfhks, "factorize_laplacian", fails)
+    vector = compute_signature(mesh, params).vector
+    spectrum_and_heat = signature_length(replace(params, version=2))
+    assert np.array_equal(vector[:spectrum_and_heat], on_mesh[:spectrum_and_heat])
+
+
+def test_version_5_solves_no_phi_unless_asked():
+    mesh = clean_mesh(*_bumpy())
+    assert CFHKS.version == 5 and not needs_phi(CFHKS)
+    sig = compute_signature(mesh, CFHKS)
+    assert sig.phi is None and np.isnan(sig.curvature_error) and np.isnan(sig.phi_range).all()
+    asked = compute_signature(mesh, CFHKS, phi=True)
+    assert np.array_equal(asked.vector, sig.vector)
+    assert np.array_equal(asked.phi, conformal_factor(mesh).phi)
+    assert needs_phi(Params()) and needs_phi(Params(descriptor="cfhks", version=1))
+
+
+def test_version_5_is_version_4_with_the_curvature_binned_apart():
+    """Same spectrum and heat; the curvature channel as close as its looser solve allows."""
+    mesh = clean_mesh(*_fine_bumpy())
+    v4 = compute_signature(mesh, V4).vector
+    v5 = compute_signature(mesh, CFHKS).vector
+    head = signature_length(replace(CFHKS, version=2))
+    assert np.array_equal(v5[:head], v4[:head])
+    design = cfhks.DESIGNS[5]
+    ops = conformal_factor(mesh).operators
+    exact = cfhks.curvature_histograms(
+        smoothed_curvature(ops, design.scales), ops.vertex_area, design.bins
+    )
+    assert np.abs(cfhks.weigh_curvature(exact, design) - v5[head:]).sum() < 1e-3

@@ -48,13 +48,23 @@ def test_boundary_turning_is_not_curvature():
     assert ops.boundary.any() and np.allclose(values, 0.0, atol=1e-9)
 
 
-def test_histograms_weigh_by_area():
+@pytest.mark.parametrize("bins", [48, 49])
+def test_histograms_weigh_by_area(bins):
     values = np.array([[0.0], [1e6], [-1e6]])
-    hist = cfhks.curvature_histograms(values, np.array([2.0, 1.0, 1.0]))
-    assert hist.shape == (1, cfhks.CURVATURE_BINS)
-    assert hist[0, cfhks.CURVATURE_BINS // 2] == 0.5  # asinh(0) in the middle bin
+    hist = cfhks.curvature_histograms(values, np.array([2.0, 1.0, 1.0]), bins)
+    assert hist.shape == (1, bins)
+    assert hist[0, bins // 2] == 0.5  # asinh(0): on the middle edge (48) or bin's centre (49)
     assert hist[0, 0] == hist[0, -1] == 0.25  # beyond the range: the end bins
-    assert cfhks.curvature_histograms(np.empty((3, 0)), np.ones(3)).shape == (0, 48)
+    assert cfhks.curvature_histograms(np.empty((3, 0)), np.ones(3), bins).shape == (0, bins)
+
+
+def test_zero_curvature_falls_in_one_bin_whatever_the_round_off():
+    """Flat parts: version 4's bin edge at zero splits them by the sign of their round-off,
+    version 5's 49 bins keep them in the middle one."""
+    values = np.array([[1e-9], [-1e-9], [0.0]])
+    v4 = cfhks.curvature_histograms(values, np.ones(3), cfhks.DESIGNS[4].bins)
+    v5 = cfhks.curvature_histograms(values, np.ones(3), cfhks.DESIGNS[5].bins)
+    assert v4.max() < 1.0 and v5[0, cfhks.DESIGNS[5].bins // 2] == 1.0
 
 
 def test_conjugate_gradients_agree_with_the_factorisation(monkeypatch):

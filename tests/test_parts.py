@@ -38,7 +38,7 @@ def test_only_the_curvature_channel_takes_partial_queries():
     columns = curvature_columns(CFHKS)
     design = cfhks.DESIGNS[CFHKS.version]
     assert columns.stop == design.length == signature_length(CFHKS)
-    assert columns.stop - columns.start == len(design.scales) * cfhks.CURVATURE_BINS
+    assert columns.stop - columns.start == len(design.scales) * design.bins
     for params in (Params(), Params(descriptor="cfhks", version=2)):
         with pytest.raises(PartialError, match="rebuild it"):
             curvature_columns(params)
