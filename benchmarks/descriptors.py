@@ -1,10 +1,11 @@
-"""The descriptors on SHREC 2007, McGill and FAUST in one run: cf, cfhks 1 to 4, ShapeDNA.
+"""The descriptors on SHREC 2007, McGill and FAUST in one run: cf, cfhks 1 to 5, ShapeDNA.
 
 Stages (each prints Markdown for docs/descriptors.md; run from the repository root):
 
     python benchmarks/descriptors.py measure    # every descriptor of every mesh, CPU timed -> cache
     python benchmarks/descriptors.py study      # how version 2 was chosen: leave one collection out
     python benchmarks/descriptors.py study3     # how version 3 was chosen
+    python benchmarks/descriptors.py study5     # version 5's curvature divisor, by version 3's rule
     python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all six
     python benchmarks/descriptors.py cost       # whole `cfsig index` runs: default, cf, ShapeDNA
     python benchmarks/descriptors.py coarse     # version 4: the spectrum of a simplified copy
@@ -82,6 +83,7 @@ DESCRIPTORS = {
     "cfhks 2": Params(descriptor="cfhks", version=2),
     "cfhks 3": Params(descriptor="cfhks", version=3),
     "cfhks 4": Params(descriptor="cfhks", version=4),
+    "cfhks 5": Params(descriptor="cfhks", version=5),
 }
 NAMES = (*DESCRIPTORS, "ShapeDNA")
 V2 = cfhks.DESIGNS[2]
@@ -341,6 +343,32 @@ def study3(args: argparse.Namespace) -> None:
     print("FT: " + ", ".join(f"{c} {ft[c]:.3f}" for c in COLLECTIONS))
 
 
+def _v5_one(path: Path) -> np.ndarray:
+    """Version 5's vector of one mesh."""
+    return signature_file(path, DESCRIPTORS["cfhks 5"]).vector
+
+
+def study5(args: argparse.Namespace) -> None:
+    """Version 5's curvature divisor by version 3's rule, on version 3's training collections:
+    the curvature channel weighs as much as the rest of the vector, its median L1 distance over
+    the pairs (averaged over the collections) made equal to the rest's."""
+    design = cfhks.DESIGNS[5]
+    head = design.length - design.bins * len(design.scales)
+    curvature, rest = [], []
+    for name in V3_CHOSEN_ON:
+        with ProcessPoolExecutor(args.jobs) as pool:
+            vectors = np.array(list(pool.map(_v5_one, _paths(args.data_root, name), chunksize=4)))
+        # back to the unweighted histograms, whose L1 the divisor scales
+        raw = vectors[:, head:] * design.bins * design.curvature
+        curvature.append(_median(_pairwise(raw)) * raw.shape[1])
+        rest.append(_median(_pairwise(vectors[:, :head])) * head)
+    divisor = np.mean(curvature) / (design.bins * np.mean(rest))
+    print(f"Median L1 over the pairs of {' and '.join(V3_CHOSEN_ON)}: curvature histograms ")
+    print(f"{', '.join(f'{c:.4f}' for c in curvature)}; the rest of the vector ")
+    print(f"{', '.join(f'{r:.4f}' for r in rest)}. Version 5's curvature divisor: {divisor:.6f}")
+    print(f"(version 3's and 4's: {cfhks.DESIGNS[4].curvature}, for {cfhks.DESIGNS[4].bins} bins)")
+
+
 def _distances(name: str, vectors: np.ndarray) -> np.ndarray:
     """A descriptor's all-pairs distance: L2 for ShapeDNA, L1 (the index's) otherwise."""
     return _pairwise(vectors, order=2 if name == "ShapeDNA" else 1)
@@ -566,6 +594,7 @@ def main() -> None:
         "measure": measure,
         "study": study,
         "study3": study3,
+        "study5": study5,
         "compare": compare,
         "cost": cost,
         "coarse": coarse,
