@@ -9,7 +9,7 @@ Stages (each prints Markdown for docs/descriptors.md; run from the repository ro
     python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all six
     python benchmarks/descriptors.py cost       # whole `cfsig index` runs: default, cf, ShapeDNA
     python benchmarks/descriptors.py coarse     # version 4: the spectrum of a simplified copy
-    python benchmarks/descriptors.py stages     # CPU seconds of each stage of versions 3 and 4
+    python benchmarks/descriptors.py stages     # CPU seconds of each stage of versions 3 to 5
 
 ``measure`` computes, for every mesh of the three collections (``--data-root``, where
 ``../shared/data/unpack`` puts them), six descriptors from the file, each timed in CPU seconds
@@ -522,9 +522,10 @@ def coarse(args: argparse.Namespace) -> None:
 
 
 def _stages_one(path: Path) -> dict[str, float]:
-    """CPU seconds of each stage of versions 3 and 4 on one mesh, and the curvature's agreement
-    with four sparse factorisations."""
-    design = cfhks.DESIGNS[4]
+    """CPU seconds of each stage of versions 3 to 5 on one mesh; the curvature's agreement with
+    four sparse factorisations; and how far version 5's looser conjugate gradients move its
+    curvature histograms."""
+    design, v5 = cfhks.DESIGNS[4], cfhks.DESIGNS[5]
     seconds: dict[str, float] = {}
 
     def timed(name, step):
@@ -534,9 +535,16 @@ def _stages_one(path: Path) -> dict[str, float]:
         return result
 
     mesh = timed("read and repair", lambda: repair_mesh(read_mesh(path)))
-    cf = timed("phi (the conformal solve)", lambda: conformal_factor(mesh, Params().mollify))
-    ops = cf.operators
-    values = timed("curvature, conjugate gradients", lambda: smoothed_curvature(ops, design.scales))
+    ops = timed("operators (Laplacian, curvature, areas)", lambda: operators(mesh))
+    cf = timed("phi (the conformal solve; cf only)", lambda: conformal_factor(mesh))
+    values = timed(
+        "curvature, conjugate gradients to 1e-10 (versions 3, 4)",
+        lambda: smoothed_curvature(ops, design.scales),
+    )
+    loose = timed(
+        "curvature, conjugate gradients to 1e-5 (version 5)",
+        lambda: smoothed_curvature(ops, v5.scales, v5.tolerance),
+    )
     area = ops.vertex_area.sum()
     defect = np.where(ops.boundary, 0.0, ops.curvature)
 
@@ -555,14 +563,16 @@ def _stages_one(path: Path) -> dict[str, float]:
         "spectrum and heat, copy", lambda: cfhks.channels(ops, cfhks.spectrum_of(ops, copy), heat)
     )
     seconds["difference"] = float(np.abs(values - exact).max() / np.abs(exact).max())
+    histograms = [cfhks.curvature_histograms(x, ops.vertex_area, v5.bins) for x in (values, loose)]
+    seconds["moved"] = float(np.abs(histograms[0] - histograms[1]).sum())
     return seconds
 
 
 def stages(args: argparse.Namespace) -> None:
-    """CPU seconds of each stage of versions 3 and 4, summed over every k-th mesh of SHREC 2007
+    """CPU seconds of each stage of versions 3 to 5, summed over every k-th mesh of SHREC 2007
     (the cost stage's 40) and of FAUST."""
     table: dict[str, list[float]] = {}
-    difference = 0.0
+    difference, moved = 0.0, []
     for name in ("shrec07", "faust"):
         paths = _paths(args.data_root, name)
         if name == "shrec07":
@@ -573,13 +583,18 @@ def stages(args: argparse.Namespace) -> None:
         for key in rows[0]:
             table.setdefault(key, []).append(sum(r[key] for r in rows))
         difference = max(difference, *(r["difference"] for r in rows))
+        moved += [r["moved"] for r in rows]
         print(f"{name}: {len(paths)} meshes (every {args.every}th)")
     print("\nCPU seconds summed over those meshes:\n")
     print("| stage | shrec07 | faust |\n|---|---|---|")
     for key, sums in table.items():
-        if key != "difference":
+        if key not in ("difference", "moved"):
             print(f"| {key} | {sums[0]:.2f} | {sums[1]:.2f} |")
     print(f"\nLargest difference of the curvature, relative to its largest value: {difference:.1e}")
+    print(
+        f"Version 5's curvature histograms (4 scales, 49 bins) at 1e-5 against 1e-10, L1 summed "
+        f"over the scales: largest {max(moved):.1e}, mean {np.mean(moved):.1e}"
+    )
 
 
 def _ft(name: str, arrays: dict[str, np.ndarray]) -> float:

@@ -10,11 +10,19 @@ from cfsig.cli import main
 from cfsig.conformal import conformal_factor
 from cfsig.curvature import smoothed_curvature
 from cfsig.errors import SolverError
-from cfsig.index import IndexReader, IndexWriter
+from cfsig.index import IndexReader, IndexWriter, check_index
 from cfsig.mesh import clean_mesh
 from cfsig.params import VERSIONS, Params, signature_length
 from cfsig.signature import compute_signature, needs_phi
-from tests.helpers import disk, icosphere, open_cylinder, random_rotation, torus, write_off
+from tests.helpers import (
+    disk,
+    icosphere,
+    open_cylinder,
+    random_rotation,
+    read_plain,
+    torus,
+    write_off,
+)
 
 CFHKS = Params(descriptor="cfhks")
 
@@ -259,3 +267,16 @@ def test_version_5_is_version_4_with_the_curvature_binned_apart():
         smoothed_curvature(ops, design.scales), ops.vertex_area, design.bins
     )
     assert np.abs(cfhks.weigh_curvature(exact, design) - v5[head:]).sum() < 1e-3
+
+
+def test_an_index_of_version_5_keeps_no_phi_and_checks_clean(collection, tmp_path):
+    out = tmp_path / "v5.h5"
+    result = CliRunner().invoke(main, ["index", str(collection), "-o", str(out), "--jobs", "1"])
+    assert result.exit_code == 0, result.output
+    rows = read_plain(out)
+    assert rows["attrs"]["params"] == CFHKS.to_json() and len(rows["names"]) > 0
+    for key in ("phi_min", "phi_max", "curvature_error"):
+        assert np.isnan(rows[key]).all()
+    assert check_index(out) == []
+    with IndexReader(out) as reader:
+        assert np.isfinite(reader.signatures[:]).all()

@@ -47,6 +47,9 @@ def test_compute_text_json_and_save(collection, tmp_path):
     assert row["components"] == 1 and row["phi_min"] < 0 < row["phi_max"]
     saved = np.load(tmp_path / "limbs2-0.npz")
     assert saved["signature"].shape == (200,) and len(saved["phi"]) == row["vertices"]
+    # compute reports phi for every descriptor, also those that do not need it
+    row = json.loads(_run("compute", "--json", "--descriptor", "cfhks", mesh).stdout)[0]
+    assert row["phi_min"] < 0 < row["phi_max"] and row["curvature_error"] >= 0
 
 
 def test_compute_bad_file_one_line_error(tmp_path):
