@@ -543,7 +543,7 @@ def _stages_one(path: Path) -> dict[str, float]:
     )
     loose = timed(
         "curvature, conjugate gradients to 1e-5 (version 5)",
-        lambda: smoothed_curvature(ops, v5.scales, v5.tolerance),
+        lambda: smoothed_curvature(ops, v5.scales, v5.tolerance, v5.predict),
     )
     area = ops.vertex_area.sum()
     defect = np.where(ops.boundary, 0.0, ops.curvature)

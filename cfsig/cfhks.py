@@ -87,6 +87,9 @@ class Design:
         Bins of each curvature histogram.
     tolerance : float
         Relative residual of the curvature's conjugate gradients.
+    predict : bool
+        Factorise the curvature's larger scales at once when the conjugate gradients would
+        not solve them cheaply (`cfsig.curvature.smoothed_curvature`).
     """
 
     times: tuple[float, ...]
@@ -98,6 +101,7 @@ class Design:
     coarse: int = 0
     bins: int = 48
     tolerance: float = CG_TOLERANCE
+    predict: bool = False
 
     @property
     def length(self) -> int:
@@ -130,10 +134,11 @@ DESIGNS = {
 }
 # Version 5: version 4 for less work, its channels' meaning unchanged (docs/method.md, section
 # 13): the curvature's conjugate gradients stop at a relative residual of 1e-5, which moves a
-# histogram by about 1e-3 of its mass, and 49 bins put zero curvature (flat parts) in the
-# middle of a bin rather than on an edge, where round-off would decide its side. Its divisor
-# by version 3's rule on version 5's own vectors: `python benchmarks/descriptors.py study5`.
-DESIGNS[5] = replace(DESIGNS[4], bins=49, tolerance=1e-5, curvature=0.015128)
+# histogram by about 1e-3 of its mass, and give way to a factorisation as soon as they would
+# cost more; 49 bins put zero curvature (flat parts) in the middle of a bin rather than on an
+# edge, where round-off would decide its side. Its divisor by version 3's rule on version 5's
+# own vectors: `python benchmarks/descriptors.py study5`.
+DESIGNS[5] = replace(DESIGNS[4], bins=49, tolerance=1e-5, predict=True, curvature=0.015128)
 
 
 def weighted_quantiles(values: np.ndarray, weights: np.ndarray, count: int) -> np.ndarray:
@@ -222,7 +227,7 @@ def channels(
     hks = heat_kernel_signature(spectrum, np.asarray(design.times) * area)
     heat_weights = spectrum.vertex_area / area
     heat = np.array([weighted_quantiles(np.log(area * h), heat_weights, QUANTILES) for h in hks.T])
-    curvature = smoothed_curvature(ops, design.scales, design.tolerance)
+    curvature = smoothed_curvature(ops, design.scales, design.tolerance, design.predict)
     parts = {
         "spectrum": scaled,
         "heat": heat,

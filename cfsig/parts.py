@@ -89,7 +89,7 @@ def partial_vectors(ops: Operators, params: Params) -> np.ndarray:
     scales = np.asarray(design.scales)[None, :] / shares[:, None]  # (shares, scales)
     # Quadrupling scales over shares a factor 2 apart in area meet: each distinct one once.
     distinct, where = np.unique(scales, return_inverse=True)
-    values = smoothed_curvature(ops, tuple(distinct), design.tolerance)
+    values = smoothed_curvature(ops, tuple(distinct), design.tolerance, design.predict)
     values = values[:, where.reshape(scales.shape)]
     values /= shares[:, None]
     return np.array(

@@ -74,3 +74,30 @@ def test_conjugate_gradients_agree_with_the_factorisation(monkeypatch):
     direct = smoothed_curvature(ops, SCALES)
     assert not np.array_equal(iterative, direct)
     assert np.allclose(iterative, direct, rtol=1e-8, atol=1e-8 * np.abs(direct).max())
+
+
+def test_predicted_hard_scales_are_factorised_at_once(monkeypatch):
+    v, f = icosphere(4)
+    ops = operators(clean_mesh(v * [1.0, 0.6, 0.4], f))
+    scales = tuple(1e-4 * 4.0**j for j in range(4))
+    calls = []  # the iterations of each scale the conjugate gradients were tried on
+    solve = curvature._conjugate_gradients
+
+    def counted(*args):
+        result = solve(*args)
+        calls.append(result[1])
+        return result
+
+    monkeypatch.setattr(curvature, "_conjugate_gradients", counted)
+    exact = smoothed_curvature(ops, scales, 1e-12)
+    tried = len(calls)
+    # a cap between the first scale's iterations and twice them: the later scales, which
+    # would need more, are not tried with predict, and are with it off
+    monkeypatch.setattr(curvature, "CG_ITERATIONS", calls[0] * 2 - 1)
+    calls.clear()
+    predicted = smoothed_curvature(ops, scales, 1e-12, predict=True)
+    assert len(calls) == 1 < tried
+    calls.clear()
+    smoothed_curvature(ops, scales, 1e-12)
+    assert len(calls) > 1
+    np.testing.assert_allclose(predicted, exact, rtol=0, atol=1e-9 * np.abs(exact).max())
