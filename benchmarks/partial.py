@@ -19,7 +19,7 @@ whole shape (its default ``cfhks`` signature, what ``cfsig query`` does), by the
 the curvature channel alone (`cfsig.parts.partial_distances`), and as ``cfsig query --partial``
 ranks (`cfsig.parts.expanded_distances`). It also lists SHREC 2007's genus outliers, the meshes
 whose Euler characteristic is not their class's most common one, with their first tier (FT)
-against the other queries of their classes, for ``cfhks`` versions 2 and 3 and the default.
+against the other queries of their classes, for ``cfhks`` versions 2 to 4 and the default.
 """
 
 from __future__ import annotations
@@ -55,6 +55,7 @@ ROOT = Path(__file__).resolve().parents[1]
 COLLECTIONS = ("shrec07", "mcgill", "faust")
 KINDS = ("cut", "holes")
 DEFAULT = Params(descriptor="cfhks")  # the latest version
+V4 = Params(descriptor="cfhks", version=4)
 V3 = Params(descriptor="cfhks", version=3)
 V2 = Params(descriptor="cfhks", version=2)
 MEASURES = ("NN", "FT", "mAP")
@@ -146,6 +147,7 @@ def _one(item: tuple[Path, int]) -> dict:
     mesh = read_mesh(path)
     row: dict = {
         "default": compute_signature(mesh, DEFAULT).vector,
+        "v4": compute_signature(mesh, V4).vector,
         "v3": compute_signature(mesh, V3).vector,
         "v2": compute_signature(mesh, V2).vector,
         "chi": len(mesh.vertices)
@@ -214,6 +216,7 @@ def _genus_table(data: dict) -> list[str]:
     for key, title in (
         ("v2", "cfhks 2"),
         ("v3", "cfhks 3"),
+        ("v4", "cfhks 4"),
         ("default", f"cfhks {DEFAULT.version}"),
     ):
         report = evaluate_distances(l1_distances(data[key], data[key]), labels)
