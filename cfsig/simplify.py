@@ -1,9 +1,9 @@
 """Simplified copies of a mesh, by quadric edge collapses (fast-simplification).
 
 The low Laplace-Beltrami spectrum barely moves when a mesh is simplified to a few thousand
-faces, while its cost falls with the number of vertices; `cfsig.cfhks` (version 4) computes
-the spectrum and the heat kernel signature on such a copy (docs/method.md, section 12). The
-repair stage's proxy (`cfsig.repair`) is simplified the same way.
+faces, while its cost falls with the number of vertices; `cfsig.cfhks` (versions 4 and 5)
+computes the spectrum and the heat kernel signature on such a copy (docs/method.md, section
+12). The repair stage's proxy (`cfsig.repair`) is simplified the same way.
 """
 
 from __future__ import annotations
