@@ -1,12 +1,14 @@
 """Check that two versions of cfsig give the same results bit for bit on a data set.
 
 ``dump`` writes, for every mesh and solver family, phi, the signature vector and the curvature
-error, and per mesh the checked vertices and faces, the Laplacian (its CSC arrays) and the
-curvature, to an ``.npz`` file; run it once per version (each with its own ``PYTHONPATH``).
+error, and per mesh the checked vertices and faces, the Laplacian (its CSC arrays), the
+curvature and the vector of each ``cfhks`` version of ``--cfhks``, to an ``.npz`` file; run it
+once per version of cfsig (each with its own ``PYTHONPATH``).
 ``compare`` prints, per quantity, whether the two dumps are identical, and phi's largest
 difference relative to its range.
 
     python benchmarks/same_results.py dump OUT.npz [--every K] [--solvers cholmod scipy]
+        [--cfhks 1 2 3 4]
     python benchmarks/same_results.py compare A.npz B.npz
 """
 
@@ -48,6 +50,9 @@ def dump(args: argparse.Namespace) -> None:
         out[f"{key}/vertices"], out[f"{key}/faces"] = mesh.vertices, mesh.faces
         out[f"{key}/laplacian"] = np.concatenate([lap.indptr, lap.indices]).astype(float)
         out[f"{key}/laplacian_data"], out[f"{key}/curvature"] = lap.data, ops.curvature
+        for version in args.cfhks:
+            params = Params(descriptor="cfhks", version=version)
+            out[f"{key}/cfhks {version}"] = mesh_and_signature(path, params)[1].vector
     np.savez(args.out, **out)
     print(f"{len(out)} arrays written to {args.out}")
 
@@ -80,6 +85,7 @@ def main() -> None:
     run.add_argument("out", type=Path)
     common.data_arguments(run)
     run.add_argument("--solvers", nargs="+", default=["cholmod", "scipy"])
+    run.add_argument("--cfhks", nargs="*", type=int, default=[], help="cfhks versions to dump")
     check = commands.add_parser("compare", help="compare two dumps")
     check.add_argument("a", type=Path)
     check.add_argument("b", type=Path)
