@@ -5,7 +5,7 @@ Stages (each prints Markdown for docs/descriptors.md; run from the repository ro
     python benchmarks/descriptors.py measure    # every descriptor of every mesh, CPU timed -> cache
     python benchmarks/descriptors.py study      # how version 2 was chosen: leave one collection out
     python benchmarks/descriptors.py study3     # how version 3 was chosen
-    python benchmarks/descriptors.py study5     # version 5's curvature divisor, by version 3's rule
+    python benchmarks/descriptors.py study5     # version 5's curvature divisor (version 3's rule)
     python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all six
     python benchmarks/descriptors.py cost       # whole `cfsig index` runs: default, cf, ShapeDNA
     python benchmarks/descriptors.py coarse     # version 4: the spectrum of a simplified copy
@@ -343,21 +343,17 @@ def study3(args: argparse.Namespace) -> None:
     print("FT: " + ", ".join(f"{c} {ft[c]:.3f}" for c in COLLECTIONS))
 
 
-def _v5_one(path: Path) -> np.ndarray:
-    """Version 5's vector of one mesh."""
-    return signature_file(path, DESCRIPTORS["cfhks 5"]).vector
-
-
 def study5(args: argparse.Namespace) -> None:
     """Version 5's curvature divisor by version 3's rule, on version 3's training collections:
     the curvature channel weighs as much as the rest of the vector, its median L1 distance over
-    the pairs (averaged over the collections) made equal to the rest's."""
+    the pairs (averaged over the collections) made equal to the rest's. The cached vectors'
+    own divisor cancels out, so the cache may be measured before or after it is set."""
+    data = _load(args.cache)
     design = cfhks.DESIGNS[5]
     head = design.length - design.bins * len(design.scales)
     curvature, rest = [], []
     for name in V3_CHOSEN_ON:
-        with ProcessPoolExecutor(args.jobs) as pool:
-            vectors = np.array(list(pool.map(_v5_one, _paths(args.data_root, name), chunksize=4)))
+        vectors = data[name]["cfhks 5"]
         # back to the unweighted histograms, whose L1 the divisor scales
         raw = vectors[:, head:] * design.bins * design.curvature
         curvature.append(_median(_pairwise(raw)) * raw.shape[1])

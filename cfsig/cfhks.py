@@ -370,7 +370,8 @@ def cfhks_vector(
         raise ValueError(f"cfhks version {version} holds phi: give its conformal factor")
     coarse = simplified_mesh(mesh, design.coarse) if design.coarse else None
     spectrum = spectrum_of(ops, coarse, None if cf is None else cf.solve, solver)
-    return weigh(channels(ops, spectrum, design, None if cf is None else cf.phi), design)
+    phi = cf.phi if cf is not None and solves_phi(version) else None  # else weigh drops it
+    return weigh(channels(ops, spectrum, design, phi), design)
 
 
 def solves_phi(version: int) -> bool:
