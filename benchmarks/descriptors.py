@@ -1,15 +1,16 @@
-"""The descriptors on SHREC 2007, McGill and FAUST in one run: cf, cfhks 1 to 5, ShapeDNA.
+"""The descriptors on SHREC 2007, McGill and FAUST in one run: cf, cfhks 1 to 6, ShapeDNA.
 
 Stages (each prints Markdown for docs/descriptors.md; run from the repository root):
 
     python benchmarks/descriptors.py measure    # every descriptor of every mesh, CPU timed -> cache
     python benchmarks/descriptors.py study      # how version 2 was chosen: leave one collection out
     python benchmarks/descriptors.py study3     # how version 3 was chosen
-    python benchmarks/descriptors.py study5     # version 5's curvature divisor (version 3's rule)
+    python benchmarks/descriptors.py divisor    # a version's curvature divisor (version 3's rule)
+    python benchmarks/descriptors.py tolerance  # version 6's conjugate gradients' tolerance
     python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all six
     python benchmarks/descriptors.py cost       # whole `cfsig index` runs: default, cf, ShapeDNA
     python benchmarks/descriptors.py coarse     # version 4: the spectrum of a simplified copy
-    python benchmarks/descriptors.py stages     # CPU seconds of each stage of versions 3 to 5
+    python benchmarks/descriptors.py stages     # CPU seconds of each stage of versions 3 to 6
 
 ``measure`` computes, for every mesh of the three collections (``--data-root``, where
 ``../shared/data/unpack`` puts them), six descriptors from the file, each timed in CPU seconds
@@ -84,6 +85,7 @@ DESCRIPTORS = {
     "cfhks 3": Params(descriptor="cfhks", version=3),
     "cfhks 4": Params(descriptor="cfhks", version=4),
     "cfhks 5": Params(descriptor="cfhks", version=5),
+    "cfhks 6": Params(descriptor="cfhks", version=6),
 }
 NAMES = (*DESCRIPTORS, "ShapeDNA")
 V2 = cfhks.DESIGNS[2]
@@ -266,6 +268,8 @@ def study(args: argparse.Namespace) -> None:
 
 CURVATURE_WEIGHTS = (0.5, 1.0, 2.0)
 V3_CHOSEN_ON = ("shrec07", "faust")
+TOLERANCES = (1e-10, 1e-5, 1e-4, 1e-3, 1e-2)  # the first is the reference, versions 3 and 4's
+TOLERANCE_SHARE = 0.05
 
 
 def _ladders() -> list[tuple[int, ...]]:
@@ -343,26 +347,80 @@ def study3(args: argparse.Namespace) -> None:
     print("FT: " + ", ".join(f"{c} {ft[c]:.3f}" for c in COLLECTIONS))
 
 
-def study5(args: argparse.Namespace) -> None:
-    """Version 5's curvature divisor by version 3's rule, on version 3's training collections:
+def divisor(args: argparse.Namespace) -> None:
+    """A version's curvature divisor by version 3's rule, on version 3's training collections:
     the curvature channel weighs as much as the rest of the vector, its median L1 distance over
     the pairs (averaged over the collections) made equal to the rest's. The cached vectors'
     own divisor cancels out, so the cache may be measured before or after it is set."""
     data = _load(args.cache)
-    design = cfhks.DESIGNS[5]
+    design = cfhks.DESIGNS[args.version]
     head = design.length - design.bins * len(design.scales)
     curvature, rest = [], []
     for name in V3_CHOSEN_ON:
-        vectors = data[name]["cfhks 5"]
+        vectors = data[name][f"cfhks {args.version}"]
         # back to the unweighted histograms, whose L1 the divisor scales
         raw = vectors[:, head:] * design.bins * design.curvature
         curvature.append(_median(_pairwise(raw)) * raw.shape[1])
         rest.append(_median(_pairwise(vectors[:, :head])) * head)
-    divisor = np.mean(curvature) / (design.bins * np.mean(rest))
+    value = np.mean(curvature) / (design.bins * np.mean(rest))
     print(f"Median L1 over the pairs of {' and '.join(V3_CHOSEN_ON)}: curvature histograms ")
     print(f"{', '.join(f'{c:.4f}' for c in curvature)}; the rest of the vector ")
-    print(f"{', '.join(f'{r:.4f}' for r in rest)}. Version 5's curvature divisor: {divisor:.6f}")
-    print(f"(version 3's and 4's: {cfhks.DESIGNS[4].curvature}, for {cfhks.DESIGNS[4].bins} bins)")
+    print(f"{', '.join(f'{r:.4f}' for r in rest)}. Version {args.version}'s curvature divisor: ")
+    print(f"{value:.6f} (set: {design.curvature}, for {design.bins} bins)")
+
+
+def _tolerance_one(path: Path) -> dict:
+    """Version 5's curvature histograms of one mesh at each of TOLERANCES, and their CPU seconds."""
+    design = cfhks.DESIGNS[5]
+    ops = operators(repair_mesh(read_mesh(path)))
+    row: dict = {}
+    for tolerance in TOLERANCES:
+        start = time.process_time()
+        values = smoothed_curvature(ops, design.scales, tolerance, design.predict)
+        row[f"{tolerance} s"] = time.process_time() - start
+        row[tolerance] = cfhks.curvature_histograms(values, ops.vertex_area, design.bins).ravel()
+    return row
+
+
+def tolerance(args: argparse.Namespace) -> None:
+    """Version 6's tolerance: how far the curvature histograms move from the tight solve's (1e-10)
+    at each looser tolerance, against the median distance between two meshes' histograms, on
+    version 3's training collections; the loosest at which the mean movement stays within
+    TOLERANCE_SHARE of that median on each is chosen. Also, for all three collections, the CPU
+    seconds of the curvature and the first tier of version 5 with its curvature so solved."""
+    data = _load(args.cache)
+    design = cfhks.DESIGNS[5]
+    head = design.length - design.bins * len(design.scales)
+    print("| collection | tolerance | curvature CPU s | mean movement / median distance | "
+          "largest movement | FT |\n|---|---|---|---|---|---|")  # fmt: skip
+    within: dict[float, bool] = dict.fromkeys(TOLERANCES, True)
+    for name in COLLECTIONS:
+        with ProcessPoolExecutor(args.jobs) as pool:
+            rows = list(pool.map(_tolerance_one, _paths(args.data_root, name), chunksize=4))
+        tight = np.array([row[TOLERANCES[0]] for row in rows])
+        median = _median(_pairwise(tight)) * tight.shape[1]
+        for tol in TOLERANCES:
+            raw = np.array([row[tol] for row in rows])
+            moved = np.abs(raw - tight).sum(axis=1)
+            share = moved.mean() / median
+            if name in V3_CHOSEN_ON:
+                within[tol] &= bool(share <= TOLERANCE_SHARE)
+            vectors = np.hstack(
+                [data[name]["cfhks 5"][:, :head], raw / (design.bins * design.curvature)]
+            )
+            ft = _ft("v", {"v": vectors, "labels": data[name]["labels"]})
+            seconds = sum(row[f"{tol} s"] for row in rows)
+            print(
+                f"| {name} | {tol:g} | {seconds:.2f} | {share:.4f} | {moved.max():.4f} | {ft:.3f} |"
+            )
+    chosen = max(tol for tol, ok in within.items() if ok)
+    print(
+        f"\nThe loosest tolerance whose mean movement is within {TOLERANCE_SHARE:.0%} of the median"
+    )
+    print(
+        f"distance on {' and '.join(V3_CHOSEN_ON)}: {chosen:g} "
+        f"(version 6: {cfhks.DESIGNS[6].tolerance:g})"
+    )
 
 
 def _distances(name: str, vectors: np.ndarray) -> np.ndarray:
@@ -518,10 +576,10 @@ def coarse(args: argparse.Namespace) -> None:
 
 
 def _stages_one(path: Path) -> dict[str, float]:
-    """CPU seconds of each stage of versions 3 to 5 on one mesh; the curvature's agreement with
+    """CPU seconds of each stage of versions 3 to 6 on one mesh; the curvature's agreement with
     four sparse factorisations; and how far version 5's looser conjugate gradients move its
     curvature histograms."""
-    design, v5 = cfhks.DESIGNS[4], cfhks.DESIGNS[5]
+    design, v5, v6 = cfhks.DESIGNS[4], cfhks.DESIGNS[5], cfhks.DESIGNS[6]
     seconds: dict[str, float] = {}
 
     def timed(name, step):
@@ -540,6 +598,10 @@ def _stages_one(path: Path) -> dict[str, float]:
     loose = timed(
         "curvature, conjugate gradients to 1e-5 (version 5)",
         lambda: smoothed_curvature(ops, v5.scales, v5.tolerance, v5.predict),
+    )
+    timed(
+        "curvature, conjugate gradients to 1e-3 (version 6)",
+        lambda: smoothed_curvature(ops, v6.scales, v6.tolerance, v6.predict),
     )
     area = ops.vertex_area.sum()
     defect = np.where(ops.boundary, 0.0, ops.curvature)
@@ -568,7 +630,7 @@ def _stages_one(path: Path) -> dict[str, float]:
 
 
 def stages(args: argparse.Namespace) -> None:
-    """CPU seconds of each stage of versions 3 to 5, summed over every k-th mesh of SHREC 2007
+    """CPU seconds of each stage of versions 3 to 6, summed over every k-th mesh of SHREC 2007
     (the cost stage's 40) and of FAUST."""
     table: dict[str, list[float]] = {}
     difference, moved = 0.0, {"moved": [], "moved, 48 bins": []}
@@ -610,7 +672,8 @@ def main() -> None:
         "measure": measure,
         "study": study,
         "study3": study3,
-        "study5": study5,
+        "divisor": divisor,
+        "tolerance": tolerance,
         "compare": compare,
         "cost": cost,
         "coarse": coarse,
@@ -625,6 +688,9 @@ def main() -> None:
         "--every", type=int, default=10, help="cost, stages: every k-th SHREC07 mesh"
     )
     parser.add_argument("--rounds", type=int, default=3, help="cost: rounds of timings")
+    parser.add_argument(
+        "--version", type=int, default=VERSIONS["cfhks"][-1], help="divisor: cfhks version"
+    )
     parser.add_argument(
         "--faces", type=int, nargs="+", default=[2000, 4000, 8000], help="coarse: copies' faces"
     )

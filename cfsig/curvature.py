@@ -26,7 +26,8 @@ from .conformal import Operators, factorize
 from .errors import SolverError
 
 # Relative residual of the conjugate gradients of versions 3 and 4: the values then agree with a
-# direct solve's to about 1e-9 relative. Version 5 stops at 1e-5 (`cfsig.cfhks`).
+# direct solve's to about 1e-9 relative. Version 5 stops at 1e-5, version 6 at 1e-3
+# (`cfsig.cfhks`).
 CG_TOLERANCE = 1e-10
 # About as many iterations as a factorisation costs (benchmarks/descriptors.py stages): a
 # system that needs more is factorised, and so is every larger scale's, worse conditioned.
@@ -56,7 +57,7 @@ def smoothed_curvature(
         Factorise a scale at once, without trying the conjugate gradients, when the previous
         scale took more than half of `CG_ITERATIONS`: a scale at most four times the previous
         at most doubles the condition number's square root, and so about the iterations
-        (version 5; versions 3 and 4 try every scale below the first that failed).
+        (versions 5 and 6; versions 3 and 4 try every scale below the first that failed).
 
     Returns
     -------
