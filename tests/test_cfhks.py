@@ -190,6 +190,8 @@ def _fine_bumpy(stretch=1.5):
 
 
 V4 = Params(descriptor="cfhks", version=4)
+V5 = Params(descriptor="cfhks", version=5)
+V6 = Params(descriptor="cfhks", version=6)
 
 
 def test_version_4_is_version_3_on_a_mesh_smaller_than_its_copy():
@@ -212,7 +214,7 @@ def test_version_4_takes_only_the_spectrum_and_heat_from_the_copy():
     assert np.abs(v4 - v3).sum() < 0.25 * np.abs(other - v4).sum()
 
 
-@pytest.mark.parametrize("version", [4, 5])
+@pytest.mark.parametrize("version", [4, 5, 6])
 def test_the_copy_is_nearly_invariant_to_rigid_motion_and_scale(version):
     params = Params(descriptor="cfhks", version=version)
     v, f = _fine_bumpy()
@@ -225,7 +227,7 @@ def test_the_copy_is_nearly_invariant_to_rigid_motion_and_scale(version):
     assert np.abs(moved.vector - base).sum() < 0.05 * np.abs(other - base).sum()
 
 
-@pytest.mark.parametrize("version", [4, 5])
+@pytest.mark.parametrize("version", [4, 5, 6])
 def test_the_copy_falls_back_to_the_mesh_when_it_fails(monkeypatch, version):
     mesh = clean_mesh(*_fine_bumpy())
     params = Params(descriptor="cfhks", version=version)
@@ -243,9 +245,9 @@ def test_the_copy_falls_back_to_the_mesh_when_it_fails(monkeypatch, version):
     assert np.array_equal(vector[:spectrum_and_heat], on_mesh[:spectrum_and_heat])
 
 
-def test_version_5_solves_no_phi_unless_asked():
+def test_the_default_solves_no_phi_unless_asked():
     mesh = clean_mesh(*_bumpy())
-    assert CFHKS.version == 5 and not needs_phi(CFHKS)
+    assert not needs_phi(CFHKS)
     sig = compute_signature(mesh, CFHKS)
     assert sig.phi is None and np.isnan(sig.curvature_error) and np.isnan(sig.phi_range).all()
     asked = compute_signature(mesh, CFHKS, phi=True)
@@ -258,7 +260,7 @@ def test_version_5_is_version_4_with_the_curvature_binned_apart():
     """Same spectrum and heat; the curvature channel as close as its looser solve allows."""
     mesh = clean_mesh(*_fine_bumpy())
     v4 = compute_signature(mesh, V4).vector
-    v5 = compute_signature(mesh, CFHKS).vector
+    v5 = compute_signature(mesh, V5).vector
     head = signature_length(replace(CFHKS, version=2))
     assert np.array_equal(v5[:head], v4[:head])
     design = cfhks.DESIGNS[5]
@@ -269,8 +271,20 @@ def test_version_5_is_version_4_with_the_curvature_binned_apart():
     assert np.abs(cfhks.weigh_curvature(exact, design) - v5[head:]).sum() < 1e-3
 
 
-def test_an_index_of_version_5_keeps_no_phi_and_checks_clean(collection, tmp_path):
-    out = tmp_path / "v5.h5"
+def test_version_6_is_version_5_with_the_curvature_solved_more_loosely():
+    """Same spectrum and heat; the curvature channel moves far less than to another shape's."""
+    mesh = clean_mesh(*_fine_bumpy())
+    v5 = compute_signature(mesh, V5).vector
+    v6 = compute_signature(mesh, V6).vector
+    head = signature_length(replace(CFHKS, version=2))
+    assert np.array_equal(v6[:head], v5[:head])
+    assert not np.array_equal(v6, v5)  # else the looser tolerance would not be in use
+    other = compute_signature(clean_mesh(*_fine_bumpy(stretch=4.0)), V6).vector
+    assert np.abs(v6[head:] - v5[head:]).sum() < 0.05 * np.abs(other[head:] - v6[head:]).sum()
+
+
+def test_an_index_of_the_default_keeps_no_phi_and_checks_clean(collection, tmp_path):
+    out = tmp_path / "default.h5"
     result = CliRunner().invoke(main, ["index", str(collection), "-o", str(out), "--jobs", "1"])
     assert result.exit_code == 0, result.output
     rows = read_plain(out)

@@ -44,13 +44,21 @@ def test_only_the_curvature_channel_takes_partial_queries():
             curvature_columns(params)
 
 
-def test_a_whole_as_its_own_part_matches_its_signature():
+@pytest.mark.parametrize("version", [5, 6])
+def test_a_whole_as_its_own_part_matches_its_signature(version):
+    """Up to the curvature's conjugate gradients, which start from other guesses here: to 1e-5
+    (version 5) they agree closely; to 1e-3 (version 6) far more than with another shape."""
+    params = Params(descriptor="cfhks", version=version)
     mesh = clean_mesh(*_bumpy())
-    vectors = partial_vectors(operators(mesh), CFHKS)
-    columns = curvature_columns(CFHKS)
+    vectors = partial_vectors(operators(mesh), params)
+    columns = curvature_columns(params)
     assert vectors.shape == (len(SHARES), columns.stop - columns.start) and SHARES[0] == 1.0
-    stored = compute_signature(mesh, CFHKS).vector[curvature_columns(CFHKS)]
-    assert np.allclose(vectors[0], stored)
+    stored = compute_signature(mesh, params).vector[columns]
+    if version == 5:
+        assert np.allclose(vectors[0], stored)
+    else:
+        other = compute_signature(clean_mesh(*torus()), params).vector[columns]
+        assert np.abs(vectors[0] - stored).sum() < 0.05 * np.abs(other - stored).sum()
 
 
 def test_evaluate_queries_by_hand():
