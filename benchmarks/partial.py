@@ -55,6 +55,7 @@ ROOT = Path(__file__).resolve().parents[1]
 COLLECTIONS = ("shrec07", "mcgill", "faust")
 KINDS = ("cut", "holes")
 DEFAULT = Params(descriptor="cfhks")  # the latest version
+V5 = Params(descriptor="cfhks", version=5)
 V4 = Params(descriptor="cfhks", version=4)
 V3 = Params(descriptor="cfhks", version=3)
 V2 = Params(descriptor="cfhks", version=2)
@@ -147,6 +148,7 @@ def _one(item: tuple[Path, int]) -> dict:
     mesh = read_mesh(path)
     row: dict = {
         "default": compute_signature(mesh, DEFAULT).vector,
+        "v5": compute_signature(mesh, V5).vector,
         "v4": compute_signature(mesh, V4).vector,
         "v3": compute_signature(mesh, V3).vector,
         "v2": compute_signature(mesh, V2).vector,
@@ -217,6 +219,7 @@ def _genus_table(data: dict) -> list[str]:
         ("v2", "cfhks 2"),
         ("v3", "cfhks 3"),
         ("v4", "cfhks 4"),
+        ("v5", "cfhks 5"),
         ("default", f"cfhks {DEFAULT.version}"),
     ):
         report = evaluate_distances(l1_distances(data[key], data[key]), labels)
