@@ -507,6 +507,13 @@ def cost(args: argparse.Namespace) -> None:
     print("\n".join(f"| {name} | {s:.2f} |" for name, s in med.items()))
     default, cf, dna = med["default, 1 job"], med["cf, 1 job"], med["ShapeDNA, 1 process"]
     print(f"\ndefault / cf: {default / cf:.2f}; ShapeDNA / default: {dna / default:.2f}")
+    for name, (top, bottom) in {
+        "default / cf": ("default, 1 job", "cf, 1 job"),
+        "ShapeDNA / default": ("ShapeDNA, 1 process", "default, 1 job"),
+    }.items():
+        ratios = np.array(runs[top]) / np.array(runs[bottom])
+        listed = ", ".join(f"{r:.2f}" for r in ratios)
+        print(f"{name}, round by round: {listed} (median {np.median(ratios):.2f})")
     checks = {
         "default <= 1.5x cf (40 meshes, 1 job)": default <= 1.5 * cf,
         "ShapeDNA >= 6x default": dna >= 6 * default,
