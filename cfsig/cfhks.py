@@ -138,12 +138,12 @@ DESIGNS = {
 # histogram by about 1e-3 of its mass, and give way to a factorisation as soon as they would
 # cost more; 49 bins put zero curvature (flat parts) in the middle of a bin rather than on an
 # edge, where round-off would decide its side. Its divisor by version 3's rule on version 5's
-# own vectors: `python benchmarks/descriptors.py study5`.
+# own vectors: `python benchmarks/descriptors.py divisor --version 5`.
 DESIGNS[5] = replace(DESIGNS[4], bins=49, tolerance=1e-5, predict=True, curvature=0.015128)
 # Version 6: version 5 with the curvature's conjugate gradients stopped at a relative residual of
 # 1e-3, the loosest power of ten at which the histograms move, on average over SHREC 2007's and
 # FAUST's meshes, by at most 5% of the median distance between two meshes' histograms
-# (`python benchmarks/descriptors.py tolerance`; docs/method.md, section 13). Its divisor by
+# (`python benchmarks/descriptors.py tolerance`; docs/method.md, section 14). Its divisor by
 # version 3's rule: `python benchmarks/descriptors.py divisor --version 6`.
 DESIGNS[6] = replace(DESIGNS[5], tolerance=1e-3, curvature=0.015126)
 

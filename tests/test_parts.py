@@ -47,7 +47,8 @@ def test_only_the_curvature_channel_takes_partial_queries():
 @pytest.mark.parametrize("version", [5, 6])
 def test_a_whole_as_its_own_part_matches_its_signature(version):
     """Up to the curvature's conjugate gradients, which start from other guesses here: to 1e-5
-    (version 5) they agree closely; to 1e-3 (version 6) far more than with another shape."""
+    (version 5) the two agree to allclose's tolerance; to 1e-3 (version 6) within 5% of the
+    distance to another shape."""
     params = Params(descriptor="cfhks", version=version)
     mesh = clean_mesh(*_bumpy())
     vectors = partial_vectors(operators(mesh), params)
