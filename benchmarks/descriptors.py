@@ -7,15 +7,15 @@ Stages (each prints Markdown for docs/descriptors.md; run from the repository ro
     python benchmarks/descriptors.py study3     # how version 3 was chosen
     python benchmarks/descriptors.py divisor    # a version's curvature divisor (version 3's rule)
     python benchmarks/descriptors.py tolerance  # version 6's conjugate gradients' tolerance
-    python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all six
+    python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all eight
     python benchmarks/descriptors.py cost       # whole `cfsig index` runs: default, cf, ShapeDNA
     python benchmarks/descriptors.py coarse     # version 4: the spectrum of a simplified copy
     python benchmarks/descriptors.py stages     # CPU seconds of each stage of versions 3 to 6
 
 ``measure`` computes, for every mesh of the three collections (``--data-root``, where
-``../shared/data/unpack`` puts them), six descriptors from the file, each timed in CPU seconds
+``../shared/data/unpack`` puts them), eight descriptors from the file, each timed in CPU seconds
 of its worker process with one BLAS thread, reading included: ``cf`` (the paper's), ``cfhks``
-versions 1 to 4 (`cfsig.cfhks.DESIGNS`) and ShapeDNA (lapy, the 50 smallest nonzero
+versions 1 to 6 (`cfsig.cfhks.DESIGNS`) and ShapeDNA (lapy, the 50 smallest nonzero
 eigenvalues times the area divided by their index, compared by L2, as in the issue's table). It
 also keeps the unweighted channels of version 2 (phi, the spectrum, heat at eight times), from
 which ``study`` builds every candidate weighting. Caches go under ``--cache`` (never commit).
@@ -26,10 +26,16 @@ collections (label-free), by the mean first tier (FT) on the training collection
 collection left out, reporting the left-out one, then on SHREC 2007 and McGill, which gives
 version 2 (FAUST is held out).
 
-``cost`` times whole processes, alternating, three rounds, medians: ``cfsig index`` with one job
-on every 10th SHREC 2007 mesh (40) with the default descriptor and with ``--descriptor cf``,
-ShapeDNA on the same files in one process (this script's ``shapedna`` stage), and ``cfsig
-index`` with two jobs on all 400 for both descriptors.
+``cost`` times whole processes, alternating, ``--rounds`` rounds (three unless asked), medians
+and each round's own ratios: ``cfsig index`` with one job on every 10th SHREC 2007 mesh (40)
+with the default descriptor and with ``--descriptor cf``, ShapeDNA on the same files in one
+process (this script's ``shapedna`` stage), and ``cfsig index`` with two jobs on all 400 for
+both descriptors.
+
+``tolerance`` chooses version 6's: the loosest of `TOLERANCES` at which version 5's curvature
+histograms move from the 1e-10 solve's, on average over a collection's meshes, by at most
+`TOLERANCE_SHARE` of the median distance between two meshes' histograms, on SHREC 2007 and
+FAUST (version 3's training collections).
 
 ``coarse`` chooses version 4's copy: version 3 with the spectrum and heat computed on a copy of
 each mesh simplified by fast-simplification to each of ``--faces`` faces (meshes with fewer are
