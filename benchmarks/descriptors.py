@@ -414,7 +414,7 @@ def tolerance(args: argparse.Namespace) -> None:
             vectors = np.hstack(
                 [data[name]["cfhks 5"][:, :head], raw / (design.bins * design.curvature)]
             )
-            ft = _ft("v", {"v": vectors, "labels": data[name]["labels"]})
+            ft = _report(_pairwise(vectors), data[name]["labels"]).measures["FT"]
             seconds = sum(row[f"{tol} s"] for row in rows)
             print(
                 f"| {name} | {tol:g} | {seconds:.2f} | {share:.4f} | {moved.max():.4f} | {ft:.3f} |"
