@@ -19,7 +19,9 @@ whole shape (its default ``cfhks`` signature, what ``cfsig query`` does), by the
 the curvature channel alone (`cfsig.parts.partial_distances`), and as ``cfsig query --partial``
 ranks (`cfsig.parts.expanded_distances`). It also lists SHREC 2007's genus outliers, the meshes
 whose Euler characteristic is not their class's most common one, with their first tier (FT)
-against the other queries of their classes, for ``cfhks`` versions 2 to 4 and the default.
+against the other queries of their classes, for ``cfhks`` versions 2 to 5 and the default, for
+each channel of the default alone, and for ShapeDNA (`descriptors.shapedna`, lapy: the
+``bench`` extra): whether any of them ranks the outliers as well as their classes' others.
 """
 
 from __future__ import annotations
@@ -40,8 +42,10 @@ from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
+from descriptors import shapedna
 from scipy.sparse.csgraph import connected_components, dijkstra
 
+from cfsig import cfhks
 from cfsig.conformal import operators
 from cfsig.geometry import mesh_edges
 from cfsig.measures import evaluate_distances, evaluate_queries
@@ -141,9 +145,10 @@ def holes(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     return _closest(candidates, area.sum(), 0.5, 1.0)
 
 
-def _one(item: tuple[Path, int]) -> dict:
-    """The wholes' signatures of one mesh, and its parts' vectors, shares and signatures."""
-    path, seed = item
+def _one(item: tuple[Path, int, bool]) -> dict:
+    """The wholes' signatures of one mesh (and its ShapeDNA if ``genus``), and its parts'
+    vectors, shares and signatures."""
+    path, seed, genus = item
     rng = np.random.default_rng(seed)
     mesh = read_mesh(path)
     row: dict = {
@@ -156,6 +161,8 @@ def _one(item: tuple[Path, int]) -> dict:
         - len(mesh_edges(mesh.faces, len(mesh.vertices)).ends)
         + len(mesh.faces),
     }
+    if genus:
+        row["ShapeDNA"] = shapedna(path)
     for kind, make in (("cut", cut), ("holes", holes)):
         part = make(mesh, rng)
         row[f"{kind} share"] = _area(part).sum() / _area(mesh).sum()
@@ -170,7 +177,8 @@ def _measure(name: str, data_root: Path, jobs: int, every: int) -> dict:
     if not paths:
         raise SystemExit(f"no meshes under {data_root / name}: ../shared/data/unpack {name}")
     with ProcessPoolExecutor(jobs) as pool:
-        rows = list(pool.map(_one, [(p, i) for i, p in enumerate(paths)], chunksize=2))
+        items = [(p, i, name == "shrec07") for i, p in enumerate(paths)]
+        rows = list(pool.map(_one, items, chunksize=2))
     return {
         "labels": [p.parent.name for p in paths],
         "names": [f"{p.parent.name}/{p.name}" for p in paths],
@@ -215,14 +223,25 @@ def _genus_table(data: dict) -> list[str]:
     mixed = np.isin(labels, labels[outlier])
     lines = ["| descriptor | outliers FT | other queries of their classes FT | all NN | all FT |"]
     lines.append("|---|---|---|---|---|")
-    for key, title in (
-        ("v2", "cfhks 2"),
-        ("v3", "cfhks 3"),
-        ("v4", "cfhks 4"),
-        ("v5", "cfhks 5"),
-        ("default", f"cfhks {DEFAULT.version}"),
+    design = cfhks.DESIGNS[DEFAULT.version]
+    heat = cfhks.EIGENPAIRS + cfhks.QUANTILES * len(design.times)  # design.phi is None
+    default = data["default"]
+    distances = {
+        f"cfhks {version}": l1_distances(data[f"v{version}"], data[f"v{version}"])
+        for version in (2, 3, 4, 5)
+    }
+    distances[f"cfhks {DEFAULT.version}"] = l1_distances(default, default)
+    for channel, columns in (
+        ("spectrum", slice(0, cfhks.EIGENPAIRS)),
+        ("heat", slice(cfhks.EIGENPAIRS, heat)),
+        ("curvature", slice(heat, design.length)),
     ):
-        report = evaluate_distances(l1_distances(data[key], data[key]), labels)
+        part = default[:, columns]
+        distances[f"cfhks {DEFAULT.version}, {channel} alone"] = l1_distances(part, part)
+    dna = data["ShapeDNA"]
+    distances["ShapeDNA (L2)"] = np.linalg.norm(dna[:, None] - dna[None], axis=-1)
+    for title, distance in distances.items():
+        report = evaluate_distances(distance, labels)
         ft = report.per_query[:, 1]
         lines.append(
             f"| {title} | {ft[outlier].mean():.3f} | {ft[mixed & ~outlier].mean():.3f} | "
