@@ -30,8 +30,8 @@ version 2 (FAUST is held out).
 and each round's own ratios: ``cfsig index`` with one job on every 10th SHREC 2007 mesh (40)
 with the default descriptor and with ``--descriptor cf``, ShapeDNA on the same files in one
 process (this script's ``shapedna`` stage), and ``cfsig index`` with two jobs on all 400 for
-both descriptors. The bars are on wall time; the CPU time of each whole process, its workers
-included, is printed beside it, since a busy host stretches wall time far more than CPU time.
+both descriptors. The bars are on wall time; beside it, the CPU time of each whole process, its
+workers included (with two jobs, how busy the run kept the machine's cores).
 
 ``tolerance`` chooses version 6's: the loosest of `TOLERANCES` at which version 5's curvature
 histograms move from the 1e-10 solve's, on average over a collection's meshes, by at most
