@@ -199,9 +199,7 @@ def _partial_table(results: dict[str, dict]) -> list[str]:
             share = data[f"{kind} share"]
             rankings = {
                 "as a whole shape": l1_distances(data[f"{kind} whole"], wholes),
-                "partial distance": np.array(
-                    [partial_distances(v, wholes, DEFAULT) for v in data[f"{kind} partial"]]
-                ),
+                "partial distance": _partial_matrix(data, kind),
                 "--partial": np.array(
                     [expanded_distances(v, wholes, DEFAULT) for v in data[f"{kind} partial"]]
                 ),
@@ -211,6 +209,30 @@ def _partial_table(results: dict[str, dict]) -> list[str]:
                 spread = f"{np.median(share):.2f} ({share.min():.2f}-{share.max():.2f})"
                 cells = " | ".join(f"{m[k]:.3f}" for k in MEASURES)
                 lines.append(f"| {name} | {kind} | {spread} | {ranked} | {cells} |")
+    return lines
+
+
+def _partial_matrix(data: dict, kind: str) -> np.ndarray:
+    """The partial distance of each part of a kind (rows) to each whole (columns)."""
+    wholes = data["default"]
+    return np.array([partial_distances(v, wholes, DEFAULT) for v in data[f"{kind} partial"]])
+
+
+def _own_whole_table(results: dict[str, dict]) -> list[str]:
+    """Where each part's own whole ranks by the partial distance, per collection and kind:
+    what a second stage that checked the first candidates against the part could reach."""
+    lines = [
+        "| collection | parts | own whole first | own whole in the first 20 | its median rank |",
+        "|---|---|---|---|---|",
+    ]
+    for name, data in results.items():
+        for kind in KINDS:
+            distances = _partial_matrix(data, kind)
+            rank = (distances < np.diag(distances)[:, None]).sum(axis=1) + 1
+            lines.append(
+                f"| {name} | {kind} | {np.mean(rank == 1):.3f} | {np.mean(rank <= 20):.3f} | "
+                f"{np.median(rank):.0f} |"
+            )
     return lines
 
 
@@ -323,6 +345,10 @@ def main() -> None:
             "### Parts against the whole collections",
             "",
             *_partial_table(results),
+            "",
+            "### Where each part's own whole ranks by the partial distance",
+            "",
+            *_own_whole_table(results),
             "",
             "### Genus outliers of SHREC 2007",
             "",
