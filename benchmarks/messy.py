@@ -21,6 +21,14 @@ Kinds (`KINDS`; each copy is seeded by its file's name and the kind, so reruns a
 - ``overlap``: cut by a plane into two parts that overlap in a band of 3% of the diagonal, one
   moved by 0.1% of the diagonal so the bands interpenetrate.
 
+Three more kinds (`SCAN_KINDS`, only when ``--kinds`` names them) are not mess for the repair
+stage to undo but the ways a scan of a shape differs from its model:
+
+- ``remesh``: simplified to half its faces by quadric edge collapses (`cfsig.simplify.decimate`),
+  so that no vertex or triangle is the model's.
+- ``light-noise``, ``noise``: every vertex moved by Gaussian noise whose standard deviation per
+  coordinate is 3% or 10% of the mesh's mean edge length.
+
 ``measure`` computes the clean signatures (the clean index) and the messy ones with
 `cfsig.batch.compute_many`; each messy copy queries the clean index by L1 and its original's
 rank is counted (ties pessimistically). The messy collection (file i replaced by its copy of
@@ -48,6 +56,7 @@ from cfsig.batch import compute_many
 from cfsig.evaluate import evaluate_distances
 from cfsig.nearest import l1_distances
 from cfsig.params import DESCRIPTORS, REPAIR_MODES, Params
+from cfsig.simplify import decimate
 
 Mesh = tuple[np.ndarray, np.ndarray]  # vertices (n, 3) float64, faces (m, 3) int64
 SUFFIXES = (".off", ".obj", ".ply", ".stl")
@@ -324,7 +333,31 @@ def overlap(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     return concatenate([first, second])
 
 
-KINDS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
+def remesh(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """Simplified to half its faces by quadric edge collapses (``rng`` unused: deterministic)."""
+    vertices, faces = mesh
+    return decimate(vertices, faces, len(faces) // 2)
+
+
+def _jitter(mesh: Mesh, rng: np.random.Generator, share: float) -> Mesh:
+    """Every vertex moved by Gaussian noise of ``share`` times the mean edge length."""
+    vertices, faces = mesh
+    edges = vertices[faces] - vertices[np.roll(faces, 1, axis=1)]
+    sigma = share * float(np.linalg.norm(edges, axis=2).mean())
+    return vertices + rng.normal(scale=sigma, size=vertices.shape), faces
+
+
+def light_noise(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """Gaussian noise of 3% of the mean edge length on every vertex."""
+    return _jitter(mesh, rng, 0.03)
+
+
+def noise(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """Gaussian noise of 10% of the mean edge length on every vertex."""
+    return _jitter(mesh, rng, 0.1)
+
+
+MESS_KINDS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
     "fins": fins,
     "gaps": gaps,
     "holes": holes,
@@ -332,6 +365,12 @@ KINDS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
     "overlap": overlap,
     "soup": soup,
 }
+SCAN_KINDS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
+    "light-noise": light_noise,
+    "noise": noise,
+    "remesh": remesh,
+}
+KINDS = {**MESS_KINDS, **SCAN_KINDS}
 SUFFIX = {"soup": ".stl"}  # the other kinds are written as OFF
 
 
@@ -500,10 +539,16 @@ def duplicates(index: np.ndarray) -> np.ndarray:
     return same
 
 
-def collection(vectors: Sequence[np.ndarray | None], labels: Sequence[str]) -> dict:
+def collection(
+    vectors: Sequence[np.ndarray | None],
+    labels: Sequence[str],
+    models: np.ndarray | None = None,
+) -> dict:
     """Leave-one-out measures of a collection, files without a signature left out.
 
-    The measures are NaN when no class keeps two members (nothing to retrieve).
+    With ``models`` (one row per file, in the same order), each vector queries the models
+    instead of the other vectors, its own file's model left out. The measures are NaN when no
+    class keeps two members (nothing to retrieve).
     """
     kept = [i for i, v in enumerate(vectors) if v is not None]
     names = [labels[i] for i in kept]
@@ -511,7 +556,8 @@ def collection(vectors: Sequence[np.ndarray | None], labels: Sequence[str]) -> d
     if len(set(names)) == len(names):
         return {**found, **dict.fromkeys(MEASURES, float("nan"))}
     matrix = np.array([vectors[i] for i in kept])
-    return {**found, **evaluate_distances(l1_distances(matrix, matrix), names).measures}
+    against = matrix if models is None else models[kept]
+    return {**found, **evaluate_distances(l1_distances(matrix, against), names).measures}
 
 
 def measure(
@@ -554,6 +600,7 @@ def measure(
         )
         vectors = [vector(messy[p]) if p in messy else None for p in paths[kind]]
         collections[f"all {kind}"] = collection(vectors, labels)
+        collections[f"each {kind} against the clean others"] = collection(vectors, labels, index)
     return {
         "command": command(),
         "params": params.to_json(),
@@ -580,7 +627,9 @@ def markdown(results: dict, checks: list[dict]) -> str:
     """The results as Markdown: the command, the copies' ranks, the collections, the checks."""
     copies, collections = results["copies"], results["collections"]
     lines = [
-        "# Retrieval on messy copies of clean meshes",
+        "# Retrieval on "
+        + ("scan-like" if set(results["ranks"]) <= set(SCAN_KINDS) else "messy")
+        + " copies of clean meshes",
         "",
         f"Measured with `{results['command']}`: {results['meshes']} clean meshes, parameters "
         f"`{results['params']}`; kinds of mess as in the docstring of benchmarks/messy.py.",
@@ -598,7 +647,9 @@ def markdown(results: dict, checks: list[dict]) -> str:
         "",
         "Leave-one-out retrieval of each collection: the clean one; the messy one, file i "
         "replaced by its copy of kind i mod K (files sorted); one per kind, every file replaced "
-        "by its copy of that kind. Failed files are left out:",
+        "by its copy of that kind; and each copy of a kind as a query against the clean "
+        "collection, its own original left out (a scan against an index of models). Failed "
+        "files are left out:",
         "",
         common.table(
             ["collection", "meshes", "left out", *MEASURES],
@@ -630,7 +681,10 @@ def main() -> None:
     parser = common.arguments(__doc__.splitlines()[0])
     parser.add_argument("stage", choices=("write", "measure", "run"))
     parser.add_argument("--out", type=Path, help="folder of the messy copies (default: temporary)")
-    parser.add_argument("--kinds", nargs="+", choices=sorted(KINDS), default=sorted(KINDS))
+    parser.add_argument(
+        "--kinds", nargs="+", choices=sorted(KINDS), default=sorted(MESS_KINDS),
+        help="kinds of copy [the six kinds of mess]",
+    )  # fmt: skip
     parser.add_argument("--jobs", type=int, default=2, help="worker processes for signatures")
     parser.add_argument("--descriptor", choices=DESCRIPTORS, default="cfhks")
     parser.add_argument("--repair", choices=REPAIR_MODES, help="default: the library's")
