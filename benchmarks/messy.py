@@ -52,6 +52,7 @@ import common
 import igl
 import numpy as np
 
+from cfsig import cfhks
 from cfsig.batch import compute_many
 from cfsig.evaluate import evaluate_distances
 from cfsig.nearest import l1_distances
@@ -572,6 +573,12 @@ def measure(
     messy, failures = signatures([p for ps in paths.values() for p in ps], params, args.jobs)
     index = np.array([vector(clean[f]) for f in files])
     n, copies, collections = len(files), [], {"clean": collection(list(index), labels)}
+    # each channel of cfhks alone too: which of them a kind of copy moves
+    channels: dict[str, slice] = {}
+    if params.descriptor == "cfhks" and params.version is not None:
+        channels = cfhks.channel_columns(cfhks.DESIGNS[params.version])
+    for name, columns in channels.items():
+        collections[f"clean, {name} alone"] = collection(list(index[:, columns]), labels)
     mixed = [paths[kinds[i % len(kinds)]][i] for i in range(n)]
     collections["messy (kinds round-robin)"] = collection(
         [vector(messy[p]) if p in messy else None for p in mixed], labels
@@ -601,6 +608,11 @@ def measure(
         vectors = [vector(messy[p]) if p in messy else None for p in paths[kind]]
         collections[f"all {kind}"] = collection(vectors, labels)
         collections[f"each {kind} against the clean others"] = collection(vectors, labels, index)
+        for name, columns in channels.items():
+            alone = [None if v is None else v[columns] for v in vectors]
+            collections[f"each {kind} against the clean others, {name} alone"] = collection(
+                alone, labels, index[:, columns]
+            )
     return {
         "command": command(),
         "params": params.to_json(),

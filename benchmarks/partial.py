@@ -11,7 +11,11 @@ the script makes two parts, seeded by the mesh's position so that every run make
   disc of that area around a random point, 20 tries; else the try closest to the range);
 - ``holes``: 5 to 20 geodesic discs around random points removed, 10-40% of the area together,
   the largest connected piece kept if it holds at least half the area (20 tries; else the try
-  with the largest).
+  with the largest);
+- ``scan``: a second cut, as ``cut`` makes them, then remeshed and perturbed as a scan of the
+  object would be rather than a subset of its mesh: simplified to half its faces by quadric
+  edge collapses (`cfsig.simplify.decimate`, new vertices and triangles) and every vertex moved
+  by Gaussian noise of a tenth of the mean edge length.
 
 Each part is a query against the collection's whole shapes, the part's own whole among them,
 relevant the wholes of its class (`cfsig.measures.evaluate_queries`), ranked three ways: as a
@@ -54,10 +58,11 @@ from cfsig.nearest import l1_distances
 from cfsig.params import Params
 from cfsig.parts import expanded_distances, partial_distances, partial_vectors
 from cfsig.signature import compute_signature
+from cfsig.simplify import decimate
 
 ROOT = Path(__file__).resolve().parents[1]
 COLLECTIONS = ("shrec07", "mcgill", "faust")
-KINDS = ("cut", "holes")
+KINDS = ("cut", "holes", "scan")
 DEFAULT = Params(descriptor="cfhks")  # the latest version
 V5 = Params(descriptor="cfhks", version=5)
 V4 = Params(descriptor="cfhks", version=4)
@@ -145,6 +150,15 @@ def holes(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     return _closest(candidates, area.sum(), 0.5, 1.0)
 
 
+def scan(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """A cut (`cut`) remeshed to half its faces and perturbed (see the module's docstring)."""
+    part = cut(mesh, rng)
+    vertices, faces = decimate(part.vertices, part.faces, len(part.faces) // 2)
+    edges = vertices[faces] - vertices[np.roll(faces, 1, axis=1)]
+    noise = rng.normal(size=vertices.shape) * 0.1 * np.linalg.norm(edges, axis=2).mean()
+    return clean_mesh(vertices + noise, faces)
+
+
 def _one(item: tuple[Path, int, bool]) -> dict:
     """The wholes' signatures of one mesh (and its ShapeDNA if ``genus``), and its parts'
     vectors, shares and signatures."""
@@ -163,7 +177,7 @@ def _one(item: tuple[Path, int, bool]) -> dict:
     }
     if genus:
         row["ShapeDNA"] = shapedna(path)
-    for kind, make in (("cut", cut), ("holes", holes)):
+    for kind, make in (("cut", cut), ("holes", holes), ("scan", scan)):
         part = make(mesh, rng)
         row[f"{kind} share"] = _area(part).sum() / _area(mesh).sum()
         row[f"{kind} partial"] = partial_vectors(operators(part, DEFAULT.mollify), DEFAULT)
@@ -245,19 +259,13 @@ def _genus_table(data: dict) -> list[str]:
     mixed = np.isin(labels, labels[outlier])
     lines = ["| descriptor | outliers FT | other queries of their classes FT | all NN | all FT |"]
     lines.append("|---|---|---|---|---|")
-    design = cfhks.DESIGNS[DEFAULT.version]
-    heat = cfhks.EIGENPAIRS + cfhks.QUANTILES * len(design.times)  # design.phi is None
     default = data["default"]
     distances = {
         f"cfhks {version}": l1_distances(data[f"v{version}"], data[f"v{version}"])
         for version in (2, 3, 4, 5)
     }
     distances[f"cfhks {DEFAULT.version}"] = l1_distances(default, default)
-    for channel, columns in (
-        ("spectrum", slice(0, cfhks.EIGENPAIRS)),
-        ("heat", slice(cfhks.EIGENPAIRS, heat)),
-        ("curvature", slice(heat, design.length)),
-    ):
+    for channel, columns in cfhks.channel_columns(cfhks.DESIGNS[DEFAULT.version]).items():
         part = default[:, columns]
         distances[f"cfhks {DEFAULT.version}, {channel} alone"] = l1_distances(part, part)
     dna = data["ShapeDNA"]

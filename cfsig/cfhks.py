@@ -319,6 +319,36 @@ def weigh(parts: dict[str, np.ndarray], design: Design) -> np.ndarray:
     )
 
 
+def channel_columns(design: Design) -> dict[str, slice]:
+    """Where each channel lies in the descriptor vector (`weigh`'s order).
+
+    Parameters
+    ----------
+    design : Design
+        A version's constants (`DESIGNS`).
+
+    Returns
+    -------
+    columns : dict of str to slice
+        ``"phi"`` (only when the vector holds it), ``"spectrum"``, ``"heat"`` and
+        ``"curvature"`` (empty when the version has no scales), in that order, together
+        covering ``0`` to ``design.length``.
+    """
+    sizes = {
+        "phi": 0 if design.phi is None else QUANTILES,
+        "spectrum": EIGENPAIRS,
+        "heat": QUANTILES * len(design.times),
+        "curvature": design.bins * len(design.scales),
+    }
+    if design.phi is None:
+        del sizes["phi"]
+    columns, start = {}, 0
+    for name, size in sizes.items():
+        columns[name] = slice(start, start + size)
+        start += size
+    return columns
+
+
 def weigh_curvature(histograms: np.ndarray, design: Design) -> np.ndarray:
     """The curvature channel's part of the descriptor vector.
 

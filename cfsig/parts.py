@@ -20,7 +20,7 @@ import os
 
 import numpy as np
 
-from .cfhks import DESIGNS, curvature_histograms, weigh_curvature
+from .cfhks import DESIGNS, channel_columns, curvature_histograms, weigh_curvature
 from .conformal import Operators, operators
 from .curvature import smoothed_curvature
 from .errors import MeshError, PartialError, SolverError
@@ -57,7 +57,7 @@ def curvature_columns(params: Params) -> slice:
             f"index holds {params.descriptor} version {params.version}: rebuild it with "
             f"'cfsig index FOLDER -o NEW --descriptor cfhks'"
         )
-    return slice(design.length - design.bins * len(design.scales), design.length)
+    return channel_columns(design)["curvature"]
 
 
 def partial_vectors(ops: Operators, params: Params) -> np.ndarray:

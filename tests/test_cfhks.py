@@ -294,3 +294,23 @@ def test_an_index_of_the_default_keeps_no_phi_and_checks_clean(collection, tmp_p
     assert check_index(out) == []
     with IndexReader(out) as reader:
         assert np.isfinite(reader.signatures[:]).all()
+
+
+@pytest.mark.parametrize("version", sorted(cfhks.DESIGNS))
+def test_channel_columns_are_where_weigh_puts_each_channel(version):
+    design = cfhks.DESIGNS[version]
+    parts = {
+        "phi": np.full(cfhks.QUANTILES, 1.0),
+        "spectrum": np.full(cfhks.EIGENPAIRS, 2.0),
+        "heat": np.full((len(design.times), cfhks.QUANTILES), 3.0),
+        "curvature": np.full((len(design.scales), design.bins), 4.0),
+    }
+    vector = cfhks.weigh(parts, design)
+    columns = cfhks.channel_columns(design)
+    assert list(columns) == [c for c in parts if c != "phi" or design.phi is not None]
+    covered = np.concatenate([np.arange(len(vector))[s] for s in columns.values()])
+    assert np.array_equal(covered, np.arange(design.length))
+    for name, where in columns.items():
+        expected = cfhks.weigh({**parts, name: 0 * parts[name]}, design)
+        changed = np.flatnonzero(vector != expected)
+        assert np.array_equal(changed, np.arange(len(vector))[where])
