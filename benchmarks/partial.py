@@ -13,9 +13,9 @@ the script makes two parts, seeded by the mesh's position so that every run make
   the largest connected piece kept if it holds at least half the area (20 tries; else the try
   with the largest);
 - ``scan``: a second cut, as ``cut`` makes them, then remeshed and perturbed as a scan of the
-  object would be rather than a subset of its mesh: simplified to half its faces by quadric
-  edge collapses (`cfsig.simplify.decimate`, new vertices and triangles) and every vertex moved
-  by Gaussian noise of a tenth of the mean edge length.
+  object would be rather than a subset of its mesh, by ``benchmarks/messy.py``'s ``remesh`` and
+  ``noise``: simplified to half its faces by quadric edge collapses (new vertices and
+  triangles), then every vertex moved by Gaussian noise of a tenth of the mean edge length.
 
 Each part is a query against the collection's whole shapes, the part's own whole among them,
 relevant the wholes of its class (`cfsig.measures.evaluate_queries`), ranked three ways: as a
@@ -44,6 +44,7 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import messy
 import numpy as np
 import scipy.sparse as sp
 from descriptors import shapedna
@@ -58,7 +59,6 @@ from cfsig.nearest import l1_distances
 from cfsig.params import Params
 from cfsig.parts import expanded_distances, partial_distances, partial_vectors
 from cfsig.signature import compute_signature
-from cfsig.simplify import decimate
 
 ROOT = Path(__file__).resolve().parents[1]
 COLLECTIONS = ("shrec07", "mcgill", "faust")
@@ -151,12 +151,9 @@ def holes(mesh: Mesh, rng: np.random.Generator) -> Mesh:
 
 
 def scan(mesh: Mesh, rng: np.random.Generator) -> Mesh:
-    """A cut (`cut`) remeshed to half its faces and perturbed (see the module's docstring)."""
+    """A cut (`cut`) remeshed and perturbed as `messy.py`'s ``remesh`` and ``noise`` kinds."""
     part = cut(mesh, rng)
-    vertices, faces = decimate(part.vertices, part.faces, len(part.faces) // 2)
-    edges = vertices[faces] - vertices[np.roll(faces, 1, axis=1)]
-    noise = rng.normal(size=vertices.shape) * 0.1 * np.linalg.norm(edges, axis=2).mean()
-    return clean_mesh(vertices + noise, faces)
+    return clean_mesh(*messy.noise(messy.remesh((part.vertices, part.faces), rng), rng))
 
 
 def _one(item: tuple[Path, int, bool]) -> dict:
