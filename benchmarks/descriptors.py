@@ -9,6 +9,7 @@ Stages (each prints Markdown for docs/descriptors.md; run from the repository ro
     python benchmarks/descriptors.py tolerance  # version 6's conjugate gradients' tolerance
     python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all eight
     python benchmarks/descriptors.py cost       # whole `cfsig index` runs: default, cf, ShapeDNA
+    python benchmarks/descriptors.py noise      # which curvature scales survive vertex noise
     python benchmarks/descriptors.py coarse     # version 4: the spectrum of a simplified copy
     python benchmarks/descriptors.py stages     # CPU seconds of each stage of versions 3 to 6
 
@@ -32,6 +33,10 @@ with the default descriptor and with ``--descriptor cf``, ShapeDNA on the same f
 process (this script's ``shapedna`` stage), and ``cfsig index`` with two jobs on all 400 for
 both descriptors. The bars are on wall time; beside it, the CPU time of each whole process, its
 workers included (with two jobs, how busy the run kept the machine's cores).
+
+``noise`` measures, per scale of the curvature ladder, how far noise on a mesh's vertices moves
+its histogram, and what that does to a noisy query against clean models (docs/descriptors.md,
+"Scans").
 
 ``tolerance`` chooses version 6's: the loosest of `TOLERANCES` at which version 5's curvature
 histograms move from the 1e-10 solve's, on average over a collection's meshes, by at most
@@ -67,6 +72,7 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
+import messy
 import numpy as np
 import scipy.sparse as sp
 
@@ -74,7 +80,7 @@ from cfsig import cfhks
 from cfsig.conformal import conformal_factor, factorize, operators
 from cfsig.curvature import smoothed_curvature
 from cfsig.measures import RetrievalReport, evaluate_distances
-from cfsig.mesh import read_mesh
+from cfsig.mesh import clean_mesh, read_mesh
 from cfsig.params import VERSIONS, Params
 from cfsig.repair import repair_mesh
 from cfsig.signature import signature_file
@@ -431,6 +437,47 @@ def tolerance(args: argparse.Namespace) -> None:
     )
 
 
+def _noise_one(item: tuple[Path, int]) -> dict:
+    """The curvature histograms of one mesh at every scale of `LADDER`, as version 6 solves and
+    bins them, for the mesh and for its copy with `messy.noise`'s vertex noise."""
+    path, seed = item
+    design = replace(cfhks.DESIGNS[6], scales=LADDER)
+    mesh = repair_mesh(read_mesh(path))
+    vertices, faces = messy.noise((mesh.vertices, mesh.faces), np.random.default_rng(seed))
+    row = {}
+    for key, copy in (("clean", mesh), ("noisy", clean_mesh(vertices, faces))):
+        ops = operators(copy)
+        values = smoothed_curvature(ops, design.scales, design.tolerance, design.predict)
+        row[key] = cfhks.curvature_histograms(values, ops.vertex_area, design.bins)
+    return row
+
+
+def noise(args: argparse.Namespace) -> None:
+    """Which curvature scales survive noise: per scale of `LADDER`, how far each mesh's histogram
+    moves when Gaussian noise of a tenth of the mean edge length moves its vertices (messy.py's
+    ``noise``), against the median distance between two clean meshes' histograms; the first
+    tier of that scale alone on the clean collection; and of each noisy copy queried against
+    the clean others."""
+    print("| collection | scale | mean movement / median distance | clean FT | noisy against "
+          "clean FT |\n|---|---|---|---|---|")  # fmt: skip
+    for name in COLLECTIONS:
+        paths = _paths(args.data_root, name)
+        with ProcessPoolExecutor(args.jobs) as pool:
+            rows = list(pool.map(_noise_one, [(p, i) for i, p in enumerate(paths)], chunksize=4))
+        labels = [p.parent.name for p in paths]
+        for j, scale in enumerate(LADDER):
+            clean = np.array([row["clean"][j] for row in rows])
+            noisy = np.array([row["noisy"][j] for row in rows])
+            pairs = _pairwise(clean)
+            share = np.abs(noisy - clean).sum(axis=1).mean() / (_median(pairs) * clean.shape[1])
+            across = np.abs(noisy[:, None] - clean[None]).sum(axis=-1)
+            print(
+                f"| {name} | {scale:g} | {share:.2f} | {_report(pairs, labels).measures['FT']:.3f}"
+                f" | {_report(across, labels).measures['FT']:.3f} |",
+                flush=True,
+            )
+
+
 def _distances(name: str, vectors: np.ndarray) -> np.ndarray:
     """A descriptor's all-pairs distance: L2 for ShapeDNA, L1 (the index's) otherwise."""
     return _pairwise(vectors, order=2 if name == "ShapeDNA" else 1)
@@ -701,6 +748,7 @@ def main() -> None:
         "study3": study3,
         "divisor": divisor,
         "tolerance": tolerance,
+        "noise": noise,
         "compare": compare,
         "cost": cost,
         "coarse": coarse,
