@@ -368,7 +368,7 @@ def divisor(args: argparse.Namespace) -> None:
     own divisor cancels out, so the cache may be measured before or after it is set."""
     data = _load(args.cache)
     design = cfhks.DESIGNS[args.version]
-    head = design.length - design.bins * len(design.scales)
+    head = cfhks.channel_columns(design)["curvature"].start
     curvature, rest = [], []
     for name in V3_CHOSEN_ON:
         vectors = data[name][f"cfhks {args.version}"]
@@ -404,7 +404,7 @@ def tolerance(args: argparse.Namespace) -> None:
     seconds of the curvature and the first tier of version 5 with its curvature so solved."""
     data = _load(args.cache)
     design = cfhks.DESIGNS[5]
-    head = design.length - design.bins * len(design.scales)
+    head = cfhks.channel_columns(design)["curvature"].start
     print("| collection | tolerance | curvature CPU s | mean movement / median distance | "
           "largest movement | FT |\n|---|---|---|---|---|---|")  # fmt: skip
     within: dict[float, bool] = dict.fromkeys(TOLERANCES, True)

@@ -183,17 +183,23 @@ def _one(item: tuple[Path, int, bool]) -> dict:
 
 
 def _measure(name: str, data_root: Path, jobs: int, every: int) -> dict:
-    """Every row of one collection (every k-th mesh), and its labels."""
+    """Every row of one collection (every k-th mesh), its labels, and the partial distance of
+    each part of a kind (rows) to each whole (columns), for the tables that rank by it."""
     paths = sorted((data_root / name).glob("*/*.off"))[::every]
     if not paths:
         raise SystemExit(f"no meshes under {data_root / name}: ../shared/data/unpack {name}")
     with ProcessPoolExecutor(jobs) as pool:
         items = [(p, i, name == "shrec07") for i, p in enumerate(paths)]
         rows = list(pool.map(_one, items, chunksize=2))
+    data = {key: np.array([row[key] for row in rows]) for key in rows[0]}
+    for kind in KINDS:
+        data[f"{kind} partial distances"] = np.array(
+            [partial_distances(v, data["default"], DEFAULT) for v in data[f"{kind} partial"]]
+        )
     return {
         "labels": [p.parent.name for p in paths],
         "names": [f"{p.parent.name}/{p.name}" for p in paths],
-        **{key: np.array([row[key] for row in rows]) for key in rows[0]},
+        **data,
     }
 
 
@@ -210,7 +216,7 @@ def _partial_table(results: dict[str, dict]) -> list[str]:
             share = data[f"{kind} share"]
             rankings = {
                 "as a whole shape": l1_distances(data[f"{kind} whole"], wholes),
-                "partial distance": _partial_matrix(data, kind),
+                "partial distance": data[f"{kind} partial distances"],
                 "--partial": np.array(
                     [expanded_distances(v, wholes, DEFAULT) for v in data[f"{kind} partial"]]
                 ),
@@ -223,12 +229,6 @@ def _partial_table(results: dict[str, dict]) -> list[str]:
     return lines
 
 
-def _partial_matrix(data: dict, kind: str) -> np.ndarray:
-    """The partial distance of each part of a kind (rows) to each whole (columns)."""
-    wholes = data["default"]
-    return np.array([partial_distances(v, wholes, DEFAULT) for v in data[f"{kind} partial"]])
-
-
 def _own_whole_table(results: dict[str, dict]) -> list[str]:
     """Where each part's own whole ranks by the partial distance, per collection and kind:
     what a second stage that checked the first candidates against the part could reach."""
@@ -238,7 +238,7 @@ def _own_whole_table(results: dict[str, dict]) -> list[str]:
     ]
     for name, data in results.items():
         for kind in KINDS:
-            distances = _partial_matrix(data, kind)
+            distances = data[f"{kind} partial distances"]
             rank = (distances < np.diag(distances)[:, None]).sum(axis=1) + 1
             lines.append(
                 f"| {name} | {kind} | {np.mean(rank == 1):.3f} | {np.mean(rank <= 20):.3f} | "

@@ -107,12 +107,7 @@ class Design:
     @property
     def length(self) -> int:
         """Length of the descriptor vector."""
-        return (
-            (self.phi is not None) * QUANTILES
-            + EIGENPAIRS
-            + QUANTILES * len(self.times)
-            + self.bins * len(self.scales)
-        )
+        return list(channel_columns(self).values())[-1].stop
 
 
 _V1_HEAT = (0.1176, 0.1588, 0.2298, 0.2984)  # per time, then their sum's median, 4.038
