@@ -5,6 +5,7 @@ Stages (each prints Markdown for docs/descriptors.md; run from the repository ro
     python benchmarks/descriptors.py measure    # every descriptor of every mesh, CPU timed -> cache
     python benchmarks/descriptors.py study      # how version 2 was chosen: leave one collection out
     python benchmarks/descriptors.py study3     # how version 3 was chosen
+    python benchmarks/descriptors.py study7     # how version 7 was chosen: scans and models
     python benchmarks/descriptors.py divisor    # a version's curvature divisor (version 3's rule)
     python benchmarks/descriptors.py tolerance  # version 6's conjugate gradients' tolerance
     python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all eight
@@ -70,6 +71,7 @@ import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import messy
@@ -85,6 +87,7 @@ from cfsig.params import VERSIONS, Params
 from cfsig.repair import repair_mesh
 from cfsig.signature import signature_file
 from cfsig.simplify import simplified_mesh
+from cfsig.spectrum import Spectrum
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA_ROOT = ROOT.parent / "shared" / "data"
@@ -100,6 +103,7 @@ DESCRIPTORS = {
     "cfhks 4": Params(descriptor="cfhks", version=4),
     "cfhks 5": Params(descriptor="cfhks", version=5),
     "cfhks 6": Params(descriptor="cfhks", version=6),
+    "cfhks 7": Params(descriptor="cfhks", version=7),
 }
 NAMES = (*DESCRIPTORS, "ShapeDNA")
 V2 = cfhks.DESIGNS[2]
@@ -133,17 +137,23 @@ def shapedna(path: Path) -> np.ndarray:
 
 def _measure_one(path: Path) -> dict:
     """Every descriptor of one mesh with its CPU seconds, and version 2's raw channels."""
-    row: dict = {}
-    for name, params in DESCRIPTORS.items():
-        start = time.process_time()
-        row[name] = signature_file(path, params).vector
-        row[f"{name} s"] = time.process_time() - start
+    row = _measure_some(path, tuple(DESCRIPTORS))
     start = time.process_time()
     row["ShapeDNA"] = shapedna(path)
     row["ShapeDNA s"] = time.process_time() - start
     cf = conformal_factor(repair_mesh(read_mesh(path)), Params().mollify)
-    spectrum = cfhks.spectrum_of(cf.operators, solve=cf.solve)
+    spectrum = cfhks.spectrum_of(cf.operators, solve=cf.solve)[0]
     row.update(cfhks.channels(cf.operators, spectrum, replace(V2, scales=LADDER), cf.phi))
+    return row
+
+
+def _measure_some(path: Path, names: tuple[str, ...]) -> dict:
+    """Some of `DESCRIPTORS` of one mesh, with their CPU seconds."""
+    row: dict = {}
+    for name in names:
+        start = time.process_time()
+        row[name] = signature_file(path, DESCRIPTORS[name]).vector
+        row[f"{name} s"] = time.process_time() - start
     return row
 
 
@@ -156,14 +166,18 @@ def _paths(data_root: Path, name: str) -> list[Path]:
 
 
 def measure(args: argparse.Namespace) -> None:
-    """Compute and cache every descriptor of every mesh of the three collections."""
+    """Compute and cache every descriptor of every mesh of the three collections; with
+    ``--only``, those descriptors only, replacing theirs in the existing cache."""
     args.cache.mkdir(parents=True, exist_ok=True)
     for name in COLLECTIONS:
         paths = _paths(args.data_root, name)
+        work = partial(_measure_some, names=tuple(args.only)) if args.only else _measure_one
         with ProcessPoolExecutor(args.jobs) as pool:
-            rows = list(pool.map(_measure_one, paths, chunksize=2))
-        arrays = {key: np.array([row[key] for row in rows]) for key in rows[0]}
-        np.savez(args.cache / f"{name}.npz", labels=[p.parent.name for p in paths], **arrays)
+            rows = list(pool.map(work, paths, chunksize=2))
+        arrays = dict(np.load(args.cache / f"{name}.npz")) if args.only else {}
+        arrays.update({key: np.array([row[key] for row in rows]) for key in rows[0]})
+        arrays["labels"] = np.array([p.parent.name for p in paths])
+        np.savez(args.cache / f"{name}.npz", **arrays)
         print(f"{name}: {len(paths)} meshes -> {args.cache / name}.npz", flush=True)
 
 
@@ -478,6 +492,169 @@ def noise(args: argparse.Namespace) -> None:
             )
 
 
+# --- version 7: chosen for scans as well as models -------------------------------------------
+
+V7_PAIRS = (30, 45, 60)  # eigenpairs of the copy's spectrum, the heat computed from them
+V7_HEAT_WEIGHTS = (1.0, 2.0, 3.0)  # the heat channel's weight, the spectrum's being 1
+V7_QUERIES = ("clean", "noise")  # the queries whose first tiers the choice averages
+SCAN_QUERIES = ("clean", "light-noise", "noise", "remesh")  # reported for the chosen version
+
+
+def _study7_one(item: tuple[Path, int]) -> dict:
+    """Version 7's candidate channels of one mesh and of its scan-like copies (messy.py's
+    kinds, seeded by the mesh's index), all on the simplified copy, unweighted: per count of
+    `V7_PAIRS`, the log spectrum and the heat quantiles; the curvature histograms at every
+    scale of `LADDER`."""
+    path, seed = item
+    design = cfhks.DESIGNS[6]
+    mesh = repair_mesh(read_mesh(path))
+    row: dict = {}
+    for kind in SCAN_QUERIES:
+        copy = mesh
+        if kind != "clean":
+            shaken = messy.KINDS[kind]((mesh.vertices, mesh.faces), np.random.default_rng(seed))
+            copy = clean_mesh(*shaken)
+        ops = operators(copy)
+        spectrum, surface = cfhks.spectrum_of(
+            ops, simplified_mesh(copy, design.coarse), count=max(V7_PAIRS)
+        )
+        for k in V7_PAIRS:
+            part = Spectrum(spectrum.eigenvalues[:k], spectrum.eigenvectors[:, :k],
+                            spectrum.vertex_area, spectrum.labels)  # fmt: skip
+            channels = cfhks.channels(surface, part, replace(design, eigenpairs=k, scales=()))
+            row[f"{kind} spectrum {k}"] = channels["spectrum"]
+            row[f"{kind} heat {k}"] = channels["heat"].ravel()
+        values = smoothed_curvature(surface, LADDER, design.tolerance, design.predict)
+        row[f"{kind} curvature"] = cfhks.curvature_histograms(
+            values, surface.vertex_area, design.bins
+        )
+    return row
+
+
+def _study7_cache(args: argparse.Namespace) -> dict[str, dict[str, np.ndarray]]:
+    """`_study7_one` of every mesh of the three collections, cached under ``--cache``."""
+    data = {}
+    for name in COLLECTIONS:
+        cache = args.cache / f"study7-{name}.npz"
+        if not cache.exists():
+            args.cache.mkdir(parents=True, exist_ok=True)
+            paths = _paths(args.data_root, name)
+            with ProcessPoolExecutor(args.jobs) as pool:
+                items = [(p, i) for i, p in enumerate(paths)]
+                rows = list(pool.map(_study7_one, items, chunksize=4))
+            arrays = {key: np.array([row[key] for row in rows]) for key in rows[0]}
+            np.savez(cache, labels=[p.parent.name for p in paths], **arrays)
+        data[name] = dict(np.load(cache))
+    return data
+
+
+class Scans:
+    """Version 7's candidates: each channel's distances from every kind of query to the clean
+    meshes, combined with divisors from training collections, and their first tiers."""
+
+    def __init__(self, data: dict[str, dict[str, np.ndarray]]) -> None:
+        self.data = data
+        self.distances: dict[tuple[str, str], dict[str, np.ndarray]] = {}
+
+    def channel(self, collection: str, key: str) -> dict[str, np.ndarray]:
+        """L1 distances of one unweighted channel (``"spectrum 45"``, ``"heat 45"``, or
+        ``"curvature 4,6"`` for scales of LADDER by index, averaged over them) from each kind of
+        query to the clean meshes."""
+        if (collection, key) not in self.distances:
+            arrays, name = self.data[collection], key.split()[0]
+            if name == "curvature":
+                scales = [int(j) for j in key.split()[1].split(",")]
+                rows = {q: arrays[f"{q} curvature"][:, scales] / len(scales) for q in SCAN_QUERIES}
+            else:
+                rows = {q: arrays[f"{q} {key}"] for q in SCAN_QUERIES}
+            rows = {q: x.reshape(len(x), -1) for q, x in rows.items()}
+            self.distances[collection, key] = {
+                q: np.abs(x[:, None] - rows["clean"][None]).sum(axis=-1) for q, x in rows.items()
+            }
+        return self.distances[collection, key]
+
+    def combined(
+        self, collection: str, weights: dict[str, float], train: tuple[str, ...]
+    ) -> dict[str, np.ndarray]:
+        """The weighted sum of channels, each divided by its median clean distance over the
+        pairs, averaged over ``train`` (label-free), per kind of query."""
+        total: dict[str, np.ndarray] = {}
+        for key, weight in weights.items():
+            median = np.mean([_median(self.channel(t, key)["clean"]) for t in train])
+            for q, d in self.channel(collection, key).items():
+                total[q] = total.get(q, 0.0) + weight / median * d
+        return total
+
+    def first_tiers(
+        self,
+        weights: dict[str, float],
+        train: tuple[str, ...],
+        queries: tuple[str, ...],
+        collections: tuple[str, ...] = COLLECTIONS,
+    ) -> dict[tuple[str, str], float]:
+        """FT per collection and kind of query (each query's own clean mesh left out)."""
+        return {
+            (c, q): _report(d, self.data[c]["labels"]).measures["FT"]
+            for c in collections
+            for q, d in self.combined(c, weights, train).items()
+            if q in queries
+        }
+
+    def choose(self, train: tuple[str, ...]) -> tuple[dict[str, float], float]:
+        """The candidate with the best mean FT over ``train`` and `V7_QUERIES`, and that mean."""
+        best: tuple[dict[str, float], float] = ({}, -1.0)
+        for pairs, heat, (scales, weight) in itertools.product(
+            V7_PAIRS, V7_HEAT_WEIGHTS, itertools.product(_ladders(), CURVATURE_WEIGHTS)
+        ):
+            weights = {f"spectrum {pairs}": 1.0, f"heat {pairs}": heat,
+                       "curvature " + ",".join(map(str, scales)): weight}  # fmt: skip
+            scores = self.first_tiers(weights, train, V7_QUERIES, train)
+            score = float(np.mean([scores[c, q] for c in train for q in V7_QUERIES]))
+            if score > best[1]:
+                best = (weights, score)
+        return best
+
+
+def _candidate_text(weights: dict[str, float]) -> str:
+    """A version 7 candidate in words."""
+    parts = []
+    for key, weight in weights.items():
+        name, detail = key.split()
+        if name == "curvature":
+            detail = _scales_text(tuple(int(j) for j in detail.split(",")))
+        parts.append(f"{name} {detail} x{weight:g}")
+    return "; ".join(parts)
+
+
+def study7(args: argparse.Namespace) -> None:
+    """Version 7's choice: every channel on the simplified copy, chosen by the mean first tier of
+    clean queries and of noisy copies (messy.py's ``noise``) against the clean meshes; leave one
+    collection out, then on version 3's training collections; with the chosen candidate's
+    divisors and its first tiers for every kind of scan-like query."""
+    scans = Scans(_study7_cache(args))
+    header = " | ".join(f"{c} {q}" for c in COLLECTIONS for q in V7_QUERIES)
+    print(f"| left out | candidate | {header} |\n|---|---|" + "---|" * 6)
+    for left_out in COLLECTIONS:
+        train = tuple(c for c in COLLECTIONS if c != left_out)
+        weights, _ = scans.choose(train)
+        ft = scans.first_tiers(weights, train, V7_QUERIES)
+        cells = [f"**{ft[c, q]:.3f}**" if c == left_out else f"{ft[c, q]:.3f}"
+                 for c in COLLECTIONS for q in V7_QUERIES]  # fmt: skip
+        print(f"| {left_out} | {_candidate_text(weights)} | " + " | ".join(cells) + " |")
+    weights, score = scans.choose(V3_CHOSEN_ON)
+    print(f"\nChosen on {' and '.join(V3_CHOSEN_ON)} (mean FT {score:.3f}): "
+          f"{_candidate_text(weights)}\n")  # fmt: skip
+    ft = scans.first_tiers(weights, V3_CHOSEN_ON, SCAN_QUERIES)
+    print("| collection | " + " | ".join(SCAN_QUERIES) + " |\n|---|" + "---|" * 4)
+    for c in COLLECTIONS:
+        print(f"| {c} | " + " | ".join(f"{ft[c, q]:.3f}" for q in SCAN_QUERIES) + " |")
+    print("\nDivisors (each channel's median clean distance over the pairs, averaged over")
+    print(f"{' and '.join(V3_CHOSEN_ON)}, divided by its weight):")
+    for key, weight in weights.items():
+        median = np.mean([_median(scans.channel(t, key)["clean"]) for t in V3_CHOSEN_ON])
+        print(f"- {key}: {median / weight:.6f}")
+
+
 def _distances(name: str, vectors: np.ndarray) -> np.ndarray:
     """A descriptor's all-pairs distance: L2 for ShapeDNA, L1 (the index's) otherwise."""
     return _pairwise(vectors, order=2 if name == "ShapeDNA" else 1)
@@ -599,7 +776,7 @@ def _coarse_one(item: tuple[Path, int]) -> tuple[np.ndarray, float, np.ndarray]:
     mesh = repair_mesh(read_mesh(path))
     ops = operators(mesh, Params().mollify)
     copy = simplified_mesh(mesh, faces)
-    vector = cfhks.weigh(cfhks.channels(ops, cfhks.spectrum_of(ops, copy), design), design)
+    vector = cfhks.weigh(cfhks.channels(ops, cfhks.spectrum_of(ops, copy)[0], design), design)
     seconds = time.process_time() - start
     if copy is None:
         return vector, seconds, vector
@@ -607,7 +784,7 @@ def _coarse_one(item: tuple[Path, int]) -> tuple[np.ndarray, float, np.ndarray]:
     return (
         vector,
         seconds,
-        cfhks.weigh(cfhks.channels(on_copy, cfhks.spectrum_of(on_copy), design), design),
+        cfhks.weigh(cfhks.channels(on_copy, cfhks.spectrum_of(on_copy)[0], design), design),
     )
 
 
@@ -688,11 +865,12 @@ def _stages_one(path: Path) -> dict[str, float]:
     heat = replace(design, scales=())
     timed(
         "spectrum and heat, full mesh",
-        lambda: cfhks.channels(ops, cfhks.spectrum_of(ops, solve=cf.solve), heat),
+        lambda: cfhks.channels(ops, cfhks.spectrum_of(ops, solve=cf.solve)[0], heat),
     )
     copy = timed("simplified copy", lambda: simplified_mesh(mesh, design.coarse))
     timed(
-        "spectrum and heat, copy", lambda: cfhks.channels(ops, cfhks.spectrum_of(ops, copy), heat)
+        "spectrum and heat, copy",
+        lambda: cfhks.channels(ops, cfhks.spectrum_of(ops, copy)[0], heat),
     )
     seconds["difference"] = float(np.abs(values - exact).max() / np.abs(exact).max())
     for key, bins in (("moved", v5.bins), ("moved, 48 bins", design.bins)):
@@ -746,6 +924,7 @@ def main() -> None:
         "measure": measure,
         "study": study,
         "study3": study3,
+        "study7": study7,
         "divisor": divisor,
         "tolerance": tolerance,
         "noise": noise,
@@ -761,6 +940,9 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2, help="worker processes of measure")
     parser.add_argument(
         "--every", type=int, default=10, help="cost, stages: every k-th SHREC07 mesh"
+    )
+    parser.add_argument(
+        "--only", nargs="+", choices=DESCRIPTORS, help="measure: these descriptors only"
     )
     parser.add_argument("--rounds", type=int, default=3, help="cost: rounds of timings")
     parser.add_argument(

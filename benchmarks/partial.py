@@ -51,7 +51,6 @@ from descriptors import shapedna
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from cfsig import cfhks
-from cfsig.conformal import operators
 from cfsig.geometry import mesh_edges
 from cfsig.measures import evaluate_distances, evaluate_queries
 from cfsig.mesh import Mesh, clean_mesh, read_mesh
@@ -177,7 +176,7 @@ def _one(item: tuple[Path, int, bool]) -> dict:
     for kind, make in (("cut", cut), ("holes", holes), ("scan", scan)):
         part = make(mesh, rng)
         row[f"{kind} share"] = _area(part).sum() / _area(mesh).sum()
-        row[f"{kind} partial"] = partial_vectors(operators(part, DEFAULT.mollify), DEFAULT)
+        row[f"{kind} partial"] = partial_vectors(part, DEFAULT)
         row[f"{kind} whole"] = compute_signature(part, DEFAULT).vector
     return row
 

@@ -7,16 +7,16 @@ was chosen):
 - ``phi``: the distribution of the conformal factor over the surface, as ``QUANTILES``
   area-weighted quantiles; two distributions are compared by the 1-Wasserstein distance, the
   mean absolute difference of their quantile functions.
-- ``spectrum``: ``log(lambda_i * area)`` of the ``EIGENPAIRS`` smallest nonzero eigenvalues
-  (ShapeDNA, Reuter et al. 2006, on a logarithmic scale), compared by the mean absolute
-  difference.
+- ``spectrum``: ``log(lambda_i * area)`` of the version's ``eigenpairs`` smallest nonzero
+  eigenvalues (ShapeDNA, Reuter et al. 2006, on a logarithmic scale), compared by the mean
+  absolute difference.
 - ``heat``: for each diffusion time ``t = tau * area`` of the version's ``times``, the
   distribution of ``log(area * h_t(x))`` over the surface, h the heat kernel signature;
   1-Wasserstein distance per time.
 - ``curvature``: for each scale ``s`` of the version's ``scales``, the area-weighted histogram
-  of the angle defect smoothed by heat diffusion for ``s * area`` (`cfsig.curvature`), on
-  ``asinh(value / 10)`` in the version's ``bins``; L1 distance per scale. It needs no
-  eigenproblem, only conjugate gradients.
+  of the angle defect smoothed by heat diffusion for ``s * area`` (`cfsig.curvature`) on the
+  mesh (version 7: on its simplified copy), on ``asinh(value / 10)`` in the version's
+  ``bins``; L1 distance per scale. It needs no eigenproblem, only conjugate gradients.
 
 The distance between two meshes is the sum over channels of the channel's distance divided by
 a constant of the version (`Design`): a median of that distance over the pairs of unlabelled
@@ -37,6 +37,9 @@ Versions (`Params.version`; an index stores its own, and a query recomputes with
    phi and the curvature stay on the full mesh, bit for bit version 3's.
 5. Version 4 for less work: the curvature's conjugate gradients stopped at 1e-5, in 49 bins.
 6. Version 5 with the curvature's conjugate gradients stopped at 1e-3.
+7. Every channel on the simplified copy, chosen for noisy scans as well as clean models: 60
+   eigenpairs (the heat from all 60) and the curvature at 0.00025 to 0.016 (quadrupling),
+   scales at which vertex noise no longer moves it; divisors from SHREC 2007's and FAUST's pairs.
 
 Only version 1's vector holds phi, so only version 1 solves for it (`solves_phi`); the others
 factorise the Laplacian of the mesh, or of its copy, for the spectrum alone.
@@ -91,6 +94,10 @@ class Design:
     predict : bool
         Factorise the curvature's larger scales at once when the conjugate gradients would
         not solve them cheaply (`cfsig.curvature.smoothed_curvature`).
+    eigenpairs : int
+        Eigenpairs of the spectrum, from which the heat kernel signature is also computed.
+    curvature_on_copy : bool
+        Compute the curvature channel on the simplified copy rather than on the mesh itself.
     """
 
     times: tuple[float, ...]
@@ -103,6 +110,8 @@ class Design:
     bins: int = 48
     tolerance: float = CG_TOLERANCE
     predict: bool = False
+    eigenpairs: int = EIGENPAIRS
+    curvature_on_copy: bool = False
 
     @property
     def length(self) -> int:
@@ -141,6 +150,22 @@ DESIGNS[5] = replace(DESIGNS[4], bins=49, tolerance=1e-5, predict=True, curvatur
 # (`python benchmarks/descriptors.py tolerance`; docs/method.md, section 14). Its divisor by
 # version 3's rule: `python benchmarks/descriptors.py divisor --version 6`.
 DESIGNS[6] = replace(DESIGNS[5], tolerance=1e-3, curvature=0.015126)
+# Version 7: every channel on the simplified copy, chosen for scans as well as models by
+# `python benchmarks/descriptors.py study7` (docs/descriptors.md, "Version 7"; docs/method.md,
+# section 15): 60 eigenpairs, heat weight 1, curvature at 0.00025 to 0.016 (quadrupling) with
+# weight 1. Its divisors are the channels' median distances printed there (the spectrum's and
+# heat's summed over their entries, the curvature's averaged over its scales), per entry as
+# `weigh` divides.
+_V7_SCALES = tuple(0.00025 * 4.0**j for j in range(4))
+DESIGNS[7] = replace(
+    DESIGNS[6],
+    spectrum=6.136714 / 60,
+    heat=(62.617243 / QUANTILES,) * len(_V2_TIMES),
+    scales=_V7_SCALES,
+    curvature=0.512178 * len(_V7_SCALES) / DESIGNS[6].bins,
+    eigenpairs=60,
+    curvature_on_copy=True,
+)
 
 
 def weighted_quantiles(values: np.ndarray, weights: np.ndarray, count: int) -> np.ndarray:
@@ -201,9 +226,11 @@ def channels(
     Parameters
     ----------
     ops : Operators
-        The mesh's operators (`cfsig.conformal.operators`).
+        The operators on which the curvature channel is computed: the mesh's
+        (`cfsig.conformal.operators`), or its simplified copy's (`Design.curvature_on_copy`).
     spectrum : Spectrum
-        Its low spectrum, or its simplified copy's (`spectrum_of`).
+        Its low spectrum, or its simplified copy's (`spectrum_of`), with ``design.eigenpairs``
+        pairs.
     design : Design
         Gives the heat channel's times and the curvature channel's scales, bins and tolerance.
     phi : (n,) float64 or None
@@ -212,7 +239,7 @@ def channels(
     Returns
     -------
     channels : dict
-        ``"spectrum"``: (EIGENPAIRS,) ``log(lambda_i * area)``; a mesh with fewer nonzero
+        ``"spectrum"``: (design.eigenpairs,) ``log(lambda_i * area)``; a mesh with fewer nonzero
         eigenvalues repeats its largest. ``"heat"``: (len(times), QUANTILES) quantiles of
         ``log(area * h_t)``. ``"curvature"``: (len(scales), bins) `curvature_histograms`.
         ``"phi"``: (QUANTILES,) quantiles of phi, dimensionless, when ``phi`` is given.
@@ -225,7 +252,7 @@ def channels(
     weights = ops.vertex_area / ops.vertex_area.sum()
     area = spectrum.area
     scaled = np.log(spectrum.eigenvalues * area)
-    scaled = np.concatenate([scaled, np.full(EIGENPAIRS - len(scaled), scaled[-1])])
+    scaled = np.concatenate([scaled, np.full(design.eigenpairs - len(scaled), scaled[-1])])
     hks = heat_kernel_signature(spectrum, np.asarray(design.times) * area)
     heat_weights = spectrum.vertex_area / area
     heat = np.array([weighted_quantiles(np.log(area * h), heat_weights, QUANTILES) for h in hks.T])
@@ -245,8 +272,9 @@ def spectrum_of(
     coarse: Mesh | None = None,
     solve: Callable[[np.ndarray], np.ndarray] | None = None,
     solver: str = "auto",
-) -> Spectrum:
-    """The `EIGENPAIRS` smallest nonzero eigenpairs of a mesh, or of its simplified copy.
+    count: int = EIGENPAIRS,
+) -> tuple[Spectrum, Operators]:
+    """The ``count`` smallest nonzero eigenpairs of a mesh, or of its simplified copy.
 
     Parameters
     ----------
@@ -260,10 +288,14 @@ def spectrum_of(
         factorises it when it is needed.
     solver : {"auto", "cholmod", "eigen", "scipy"}
         Sparse solver backend of the factorisations made here.
+    count : int
+        Number of eigenpairs.
 
     Returns
     -------
     spectrum : Spectrum
+    surface : Operators
+        The operators it was computed on: the copy's, or ``ops``.
 
     Raises
     ------
@@ -273,17 +305,18 @@ def spectrum_of(
     if coarse is not None:
         copy = operators(coarse)
         try:
-            return _eigenpairs(copy, factorize_laplacian(copy.laplacian, copy.labels, solver))
+            factor = factorize_laplacian(copy.laplacian, copy.labels, solver)
+            return _eigenpairs(copy, factor, count), copy
         except SolverError:
             pass  # a copy the simplification left unsolvable: the spectrum of the mesh itself
     if solve is None:
         solve = factorize_laplacian(ops.laplacian, ops.labels, solver)
-    return _eigenpairs(ops, solve)
+    return _eigenpairs(ops, solve, count), ops
 
 
-def _eigenpairs(ops: Operators, solve: Callable[[np.ndarray], np.ndarray]) -> Spectrum:
-    """`laplace_spectrum` of a mesh's operators with `EIGENPAIRS` pairs."""
-    return laplace_spectrum(ops.laplacian, ops.vertex_area, ops.labels, solve, EIGENPAIRS)
+def _eigenpairs(ops: Operators, solve: Callable[[np.ndarray], np.ndarray], count: int) -> Spectrum:
+    """`laplace_spectrum` of a mesh's operators with ``count`` pairs."""
+    return laplace_spectrum(ops.laplacian, ops.vertex_area, ops.labels, solve, count)
 
 
 def weigh(parts: dict[str, np.ndarray], design: Design) -> np.ndarray:
@@ -307,7 +340,7 @@ def weigh(parts: dict[str, np.ndarray], design: Design) -> np.ndarray:
     return np.concatenate(
         [
             *phi,
-            parts["spectrum"] / (EIGENPAIRS * design.spectrum),
+            parts["spectrum"] / (design.eigenpairs * design.spectrum),
             (parts["heat"] / (QUANTILES * np.asarray(design.heat)[:, None])).ravel(),
             weigh_curvature(parts["curvature"], design),
         ]
@@ -331,7 +364,7 @@ def channel_columns(design: Design) -> dict[str, slice]:
     """
     sizes = {
         "phi": 0 if design.phi is None else QUANTILES,
-        "spectrum": EIGENPAIRS,
+        "spectrum": design.eigenpairs,
         "heat": QUANTILES * len(design.times),
         "curvature": design.bins * len(design.scales),
     }
@@ -401,9 +434,11 @@ def cfhks_vector(
     if solves_phi(version) and cf is None:
         raise ValueError(f"cfhks version {version} holds phi: give its conformal factor")
     coarse = simplified_mesh(mesh, design.coarse) if design.coarse else None
-    spectrum = spectrum_of(ops, coarse, None if cf is None else cf.solve, solver)
+    solve = None if cf is None else cf.solve
+    spectrum, surface = spectrum_of(ops, coarse, solve, solver, design.eigenpairs)
     phi = cf.phi if cf is not None and solves_phi(version) else None  # else weigh drops it
-    return weigh(channels(ops, spectrum, design, phi), design)
+    on = surface if design.curvature_on_copy else ops
+    return weigh(channels(on, spectrum, design, phi), design)
 
 
 def solves_phi(version: int) -> bool:

@@ -7,7 +7,7 @@ from dataclasses import asdict, dataclass, fields, replace
 
 DESCRIPTORS = ("cf", "cfhks")
 # The versions of each descriptor, the last one the default (docs/descriptors.md).
-VERSIONS = {"cf": (1,), "cfhks": (1, 2, 3, 4, 5, 6)}
+VERSIONS = {"cf": (1,), "cfhks": (1, 2, 3, 4, 5, 6, 7)}
 REPAIR_MODES = ("auto", "off", "proxy")
 # The length of the cfhks vector per version, `cfsig.cfhks.DESIGNS[version].length`
 # (tests/test_cfhks.py checks that the two agree), here so that an index needs no SciPy.
@@ -18,6 +18,7 @@ CFHKS_LENGTHS = {
     4: 30 + 64 * 8 + 48 * 4,
     5: 30 + 64 * 8 + 49 * 4,
     6: 30 + 64 * 8 + 49 * 4,
+    7: 60 + 64 * 8 + 49 * 4,
 }
 SOLVERS = ("auto", "cholmod", "eigen", "scipy")  # sparse solver backends (`cfsig.conformal`)
 

@@ -20,14 +20,15 @@ import os
 
 import numpy as np
 
-from .cfhks import DESIGNS, channel_columns, curvature_histograms, weigh_curvature
+from .cfhks import DESIGNS, Design, channel_columns, curvature_histograms, weigh_curvature
 from .conformal import Operators, operators
 from .curvature import smoothed_curvature
 from .errors import MeshError, PartialError, SolverError
 from .index import IndexReader
-from .mesh import read_mesh
+from .mesh import Mesh, read_mesh
 from .nearest import Hit, l1_distances, nearest
 from .params import Params
+from .simplify import simplified_mesh
 
 SHARES = tuple(2.0 ** (-j / 2) for j in range(7))  # a part's area over its whole's: 1 to 1/8
 
@@ -60,13 +61,13 @@ def curvature_columns(params: Params) -> slice:
     return channel_columns(design)["curvature"]
 
 
-def partial_vectors(ops: Operators, params: Params) -> np.ndarray:
+def partial_vectors(mesh: Mesh, params: Params) -> np.ndarray:
     """The curvature channel of a part for each share of `SHARES`, weighed as in the index.
 
     Parameters
     ----------
-    ops : Operators
-        The part's operators (`cfsig.conformal.operators`); its boundary may be open.
+    mesh : Mesh
+        The part; its boundary may be open.
     params : Params
         The index's parameters.
 
@@ -85,19 +86,33 @@ def partial_vectors(ops: Operators, params: Params) -> np.ndarray:
     curvature_columns(params)
     assert params.version is not None  # checked by curvature_columns
     design = DESIGNS[params.version]
-    shares = np.asarray(SHARES)
-    scales = np.asarray(design.scales)[None, :] / shares[:, None]  # (shares, scales)
+    if not design.curvature_on_copy:
+        return _share_vectors(operators(mesh, params.mollify), design, SHARES)
+    # The wholes' curvature is measured on copies of `coarse` faces (`cfsig.cfhks`): a part
+    # that is a share f of its whole is simplified to f times as many.
+    rows = []
+    for share in SHARES:
+        copy = simplified_mesh(mesh, round(design.coarse * share))
+        ops = operators(copy) if copy is not None else operators(mesh, params.mollify)
+        rows.append(_share_vectors(ops, design, (share,)))
+    return np.concatenate(rows)
+
+
+def _share_vectors(ops: Operators, design: Design, shares: tuple[float, ...]) -> np.ndarray:
+    """`partial_vectors` of a part's operators for some shares of `SHARES`."""
+    fractions = np.asarray(shares)
+    scales = np.asarray(design.scales)[None, :] / fractions[:, None]  # (shares, scales)
     # Quadrupling scales over shares a factor 2 apart in area meet: each distinct one once.
     distinct, where = np.unique(scales, return_inverse=True)
     values = smoothed_curvature(ops, tuple(distinct), design.tolerance, design.predict)
     values = values[:, where.reshape(scales.shape)]
-    values /= shares[:, None]
+    values /= fractions[:, None]
     return np.array(
         [
             weigh_curvature(
                 curvature_histograms(values[:, i], ops.vertex_area, design.bins), design
             )
-            for i in range(len(SHARES))
+            for i in range(len(shares))
         ]
     )
 
@@ -169,7 +184,7 @@ def partial_file(path: str | os.PathLike, params: Params) -> np.ndarray:
     curvature_columns(params)
     mesh = read_mesh(path)
     try:
-        return partial_vectors(operators(mesh, params.mollify), params)
+        return partial_vectors(mesh, params)
     except SolverError as exc:
         raise MeshError(f"{path}: {exc}") from None
 

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from cfsig import cfhks
+from cfsig import cfhks, simplify
 from cfsig.cli import main
-from cfsig.conformal import conformal_factor
+from cfsig.conformal import conformal_factor, operators
 from cfsig.curvature import smoothed_curvature
 from cfsig.errors import SolverError
 from cfsig.index import IndexReader, IndexWriter, check_index
@@ -48,11 +48,13 @@ def test_length_and_channels(version):
     v, f = _bumpy()
     design = cfhks.DESIGNS[version]
     cf = conformal_factor(clean_mesh(v, f))
-    parts = cfhks.channels(cf.operators, cfhks.spectrum_of(cf.operators), design, cf.phi)
+    parts = cfhks.channels(
+        cf.operators, cfhks.spectrum_of(cf.operators, count=design.eigenpairs)[0], design, cf.phi
+    )
     assert parts["phi"].shape == (cfhks.QUANTILES,)
     assert parts["curvature"].shape == (len(design.scales), design.bins)
     assert np.allclose(parts["curvature"].sum(axis=1), 1.0)
-    assert parts["spectrum"].shape == (cfhks.EIGENPAIRS,)
+    assert parts["spectrum"].shape == (design.eigenpairs,)
     assert parts["heat"].shape == (len(design.times), cfhks.QUANTILES)
     assert np.all(np.diff(parts["spectrum"]) >= 0) and np.all(np.diff(parts["heat"]) >= 0)
     params = Params(descriptor="cfhks", version=version)
@@ -283,6 +285,24 @@ def test_version_6_is_version_5_with_the_curvature_solved_more_loosely():
     assert np.abs(v6[head:] - v5[head:]).sum() < 0.05 * np.abs(other[head:] - v6[head:]).sum()
 
 
+def test_version_7_computes_every_channel_on_the_simplified_copy():
+    """60 eigenpairs and the curvature at version 7's scales, all of the copy."""
+    mesh = clean_mesh(*_fine_bumpy())
+    design = cfhks.DESIGNS[7]
+    copy = simplify.simplified_mesh(mesh, design.coarse)
+    assert copy is not None and len(copy.vertices) < len(mesh.vertices)
+    vector = compute_signature(mesh, Params(descriptor="cfhks", version=7)).vector
+    ops = operators(copy)
+    spectrum, surface = cfhks.spectrum_of(ops, count=design.eigenpairs)
+    assert surface is ops and len(spectrum.eigenvalues) == 60
+    assert np.allclose(vector, cfhks.weigh(cfhks.channels(ops, spectrum, design), design))
+    on_mesh = replace(design, curvature_on_copy=False)
+    columns = cfhks.channel_columns(design)["curvature"]
+    full = conformal_factor(mesh).operators
+    moved = cfhks.weigh(cfhks.channels(full, spectrum, on_mesh), on_mesh)
+    assert not np.allclose(vector[columns], moved[columns])
+
+
 def test_an_index_of_the_default_keeps_no_phi_and_checks_clean(collection, tmp_path):
     out = tmp_path / "default.h5"
     result = CliRunner().invoke(main, ["index", str(collection), "-o", str(out), "--jobs", "1"])
@@ -301,7 +321,7 @@ def test_channel_columns_are_where_weigh_puts_each_channel(version):
     design = cfhks.DESIGNS[version]
     parts = {
         "phi": np.full(cfhks.QUANTILES, 1.0),
-        "spectrum": np.full(cfhks.EIGENPAIRS, 2.0),
+        "spectrum": np.full(design.eigenpairs, 2.0),
         "heat": np.full((len(design.times), cfhks.QUANTILES), 3.0),
         "curvature": np.full((len(design.scales), design.bins), 4.0),
     }
