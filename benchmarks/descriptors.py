@@ -1,4 +1,4 @@
-"""The descriptors on SHREC 2007, McGill and FAUST in one run: cf, cfhks 1 to 6, ShapeDNA.
+"""The descriptors on SHREC 2007, McGill and FAUST in one run: cf, cfhks 1 to 7, ShapeDNA.
 
 Stages (each prints Markdown for docs/descriptors.md; run from the repository root):
 
@@ -8,19 +8,26 @@ Stages (each prints Markdown for docs/descriptors.md; run from the repository ro
     python benchmarks/descriptors.py study7     # how version 7 was chosen: scans and models
     python benchmarks/descriptors.py divisor    # a version's curvature divisor (version 3's rule)
     python benchmarks/descriptors.py tolerance  # version 6's conjugate gradients' tolerance
-    python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all eight
+    python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all nine
     python benchmarks/descriptors.py cost       # whole `cfsig index` runs: default, cf, ShapeDNA
     python benchmarks/descriptors.py noise      # which curvature scales survive vertex noise
     python benchmarks/descriptors.py coarse     # version 4: the spectrum of a simplified copy
     python benchmarks/descriptors.py stages     # CPU seconds of each stage of versions 3 to 6
 
 ``measure`` computes, for every mesh of the three collections (``--data-root``, where
-``../shared/data/unpack`` puts them), eight descriptors from the file, each timed in CPU seconds
+``../shared/data/unpack`` puts them), nine descriptors from the file, each timed in CPU seconds
 of its worker process with one BLAS thread, reading included: ``cf`` (the paper's), ``cfhks``
-versions 1 to 6 (`cfsig.cfhks.DESIGNS`) and ShapeDNA (lapy, the 50 smallest nonzero
+versions 1 to 7 (`cfsig.cfhks.DESIGNS`) and ShapeDNA (lapy, the 50 smallest nonzero
 eigenvalues times the area divided by their index, compared by L2, as in the issue's table). It
 also keeps the unweighted channels of version 2 (phi, the spectrum, heat at eight times), from
 which ``study`` builds every candidate weighting. Caches go under ``--cache`` (never commit).
+
+With ``--only NAME...``, ``measure`` computes those descriptors alone and replaces theirs in the
+existing cache (a new version added to an old cache).
+
+``study7`` chooses version 7 (every channel on the simplified copy) by the first tier of clean
+queries and of noisy copies of them against the clean meshes; its own cache of candidate
+channels, for every mesh and its scan-like copies, goes under ``--cache`` too.
 
 ``study`` chooses the channel weights and heat times over a small grid, each candidate's
 channel divisors being the medians of its channel distances averaged over the training
@@ -946,7 +953,7 @@ def main() -> None:
     )
     parser.add_argument("--rounds", type=int, default=3, help="cost: rounds of timings")
     parser.add_argument(
-        "--version", type=int, default=VERSIONS["cfhks"][-1], help="divisor: cfhks version"
+        "--version", type=int, default=6, help="divisor: cfhks version, 3 to 6 (7: study7)"
     )
     parser.add_argument(
         "--faces", type=int, nargs="+", default=[2000, 4000, 8000], help="coarse: copies' faces"

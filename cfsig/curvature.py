@@ -26,7 +26,7 @@ from .conformal import Operators, factorize
 from .errors import SolverError
 
 # Relative residual of the conjugate gradients of versions 3 and 4: the values then agree with a
-# direct solve's to about 1e-9 relative. Version 5 stops at 1e-5, version 6 at 1e-3
+# direct solve's to about 1e-9 relative. Version 5 stops at 1e-5, versions 6 and 7 at 1e-3
 # (`cfsig.cfhks`).
 CG_TOLERANCE = 1e-10
 # About as many iterations as a factorisation costs (benchmarks/descriptors.py stages): a
