@@ -254,6 +254,12 @@ def _report_errors(errors: list[str]) -> None:
 )
 @_with(_params_options)
 @_descriptor_option
+@click.option(
+    "--descriptor-version", "version", type=int, default=None,
+    help="The descriptor's version, for a new index [the latest; an existing index's own]: "
+    "e.g. cfhks 6, whose finer curvature matches exact cuts of indexed meshes best but not "
+    "noisy scans (docs/descriptors.md).",
+)  # fmt: skip
 @_solver_option
 @_jobs_option
 @click.option(
@@ -275,6 +281,7 @@ def index(
     bins,
     repair,
     descriptor,
+    version,
     solver,
     jobs,
     scheduler,
@@ -307,8 +314,9 @@ def index(
                 base = reader.params
         descriptor = descriptor or (None if base else RETRIEVAL_DESCRIPTOR)
         params = _params(
-            base, normalize=normalize, seed=seed, bins=bins, repair=repair, descriptor=descriptor
-        )
+            base, normalize=normalize, seed=seed, bins=bins, repair=repair,
+            descriptor=descriptor, version=version,
+        )  # fmt: skip
         with IndexWriter(output, params) as writer:
             bar = partial(_progress, what="indexing", routes=routes)
             added, skipped = index_meshes(

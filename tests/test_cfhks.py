@@ -334,3 +334,24 @@ def test_channel_columns_are_where_weigh_puts_each_channel(version):
         expected = cfhks.weigh({**parts, name: 0 * parts[name]}, design)
         changed = np.flatnonzero(vector != expected)
         assert np.array_equal(changed, np.arange(len(vector))[where])
+
+
+def test_index_builds_an_older_version_when_asked_and_refuses_an_unknown_one(collection, tmp_path):
+    out = tmp_path / "v6.h5"
+    runner = CliRunner()
+    made = runner.invoke(
+        main, ["index", str(collection), "-o", str(out), "-j", "1", "--descriptor-version", "6"]
+    )
+    assert made.exit_code == 0, made.output
+    with IndexReader(out) as reader:
+        assert reader.params == Params(descriptor="cfhks", version=6)
+        assert reader.signatures.shape[1] == signature_length(reader.params)
+    other = runner.invoke(
+        main, ["index", str(collection), "-o", str(out), "-j", "1", "--descriptor-version", "7"]
+    )
+    assert other.exit_code != 0 and "Traceback" not in other.output
+    unknown = runner.invoke(
+        main, ["index", str(collection), "-o", str(tmp_path / "x.h5"), "--descriptor-version", "99"]
+    )
+    assert unknown.exit_code != 0 and "no version 99" in unknown.output
+    assert not (tmp_path / "x.h5").exists()
