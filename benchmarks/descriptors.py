@@ -26,8 +26,9 @@ With ``--only NAME...``, ``measure`` computes those descriptors alone and replac
 existing cache (a new version added to an old cache).
 
 ``study7`` chooses version 7 (every channel on the simplified copy) by the first tier of clean
-queries and of noisy copies of them against the clean meshes; its own cache of candidate
-channels, for every mesh and its scan-like copies, goes under ``--cache`` too.
+queries and of noisy copies of them against the clean meshes, and prints the best candidate of
+each number of eigenpairs, the channel that sets the cost; its own cache of candidate channels,
+for every mesh and its scan-like copies, goes under ``--cache`` too.
 
 ``study`` chooses the channel weights and heat times over a small grid, each candidate's
 channel divisors being the medians of its channel distances averaged over the training
@@ -607,19 +608,21 @@ class Scans:
             if q in queries
         }
 
-    def choose(self, train: tuple[str, ...]) -> tuple[dict[str, float], float]:
-        """The candidate with the best mean FT over ``train`` and `V7_QUERIES`, and that mean."""
-        best: tuple[dict[str, float], float] = ({}, -1.0)
+    def scores(self, train: tuple[str, ...]) -> list[tuple[dict[str, float], float]]:
+        """Every candidate with its mean FT over ``train`` and `V7_QUERIES`."""
+        scored = []
         for pairs, heat, (scales, weight) in itertools.product(
             V7_PAIRS, V7_HEAT_WEIGHTS, itertools.product(_ladders(), CURVATURE_WEIGHTS)
         ):
             weights = {f"spectrum {pairs}": 1.0, f"heat {pairs}": heat,
                        "curvature " + ",".join(map(str, scales)): weight}  # fmt: skip
-            scores = self.first_tiers(weights, train, V7_QUERIES, train)
-            score = float(np.mean([scores[c, q] for c in train for q in V7_QUERIES]))
-            if score > best[1]:
-                best = (weights, score)
-        return best
+            ft = self.first_tiers(weights, train, V7_QUERIES, train)
+            scored.append((weights, float(np.mean([ft[c, q] for c in train for q in V7_QUERIES]))))
+        return scored
+
+    def choose(self, train: tuple[str, ...]) -> tuple[dict[str, float], float]:
+        """The candidate with the best mean FT over ``train`` and `V7_QUERIES`, and that mean."""
+        return max(self.scores(train), key=lambda item: item[1])
 
 
 def _candidate_text(weights: dict[str, float]) -> str:
@@ -648,9 +651,21 @@ def study7(args: argparse.Namespace) -> None:
         cells = [f"**{ft[c, q]:.3f}**" if c == left_out else f"{ft[c, q]:.3f}"
                  for c in COLLECTIONS for q in V7_QUERIES]  # fmt: skip
         print(f"| {left_out} | {_candidate_text(weights)} | " + " | ".join(cells) + " |")
-    weights, score = scans.choose(V3_CHOSEN_ON)
+    scored = scans.scores(V3_CHOSEN_ON)
+    weights, score = max(scored, key=lambda item: item[1])
     print(f"\nChosen on {' and '.join(V3_CHOSEN_ON)} (mean FT {score:.3f}): "
           f"{_candidate_text(weights)}\n")  # fmt: skip
+    print("The best candidate of each number of eigenpairs (their cost), on the same collections:")
+    print("\n| eigenpairs | candidate | mean FT | " + " | ".join(COLLECTIONS) + " (clean) |")
+    print("|---|---|---|" + "---|" * 3)
+    for pairs in V7_PAIRS:
+        best, mean = max(
+            (item for item in scored if f"spectrum {pairs}" in item[0]), key=lambda item: item[1]
+        )
+        ft = scans.first_tiers(best, V3_CHOSEN_ON, ("clean",))
+        cells = " | ".join(f"{ft[c, 'clean']:.3f}" for c in COLLECTIONS)
+        print(f"| {pairs} | {_candidate_text(best)} | {mean:.3f} | {cells} |")
+    print()
     ft = scans.first_tiers(weights, V3_CHOSEN_ON, SCAN_QUERIES)
     print("| collection | " + " | ".join(SCAN_QUERIES) + " |\n|---|" + "---|" * 4)
     for c in COLLECTIONS:
