@@ -563,6 +563,7 @@ class Scans:
     def __init__(self, data: dict[str, dict[str, np.ndarray]]) -> None:
         self.data = data
         self.distances: dict[tuple[str, str], dict[str, np.ndarray]] = {}
+        self.medians: dict[tuple[str, tuple[str, ...]], float] = {}
 
     def channel(self, collection: str, key: str) -> dict[str, np.ndarray]:
         """L1 distances of one unweighted channel (``"spectrum 45"``, ``"heat 45"``, or
@@ -588,10 +589,17 @@ class Scans:
         pairs, averaged over ``train`` (label-free), per kind of query."""
         total: dict[str, np.ndarray] = {}
         for key, weight in weights.items():
-            median = np.mean([_median(self.channel(t, key)["clean"]) for t in train])
+            median = self.median(key, train)
             for q, d in self.channel(collection, key).items():
                 total[q] = total.get(q, 0.0) + weight / median * d
         return total
+
+    def median(self, key: str, train: tuple[str, ...]) -> float:
+        """A channel's median clean distance over the pairs, averaged over ``train``."""
+        if (key, train) not in self.medians:
+            clean = [_median(self.channel(t, key)["clean"]) for t in train]
+            self.medians[key, train] = float(np.mean(clean))
+        return self.medians[key, train]
 
     def first_tiers(
         self,
@@ -673,8 +681,7 @@ def study7(args: argparse.Namespace) -> None:
     print("\nDivisors (each channel's median clean distance over the pairs, averaged over")
     print(f"{' and '.join(V3_CHOSEN_ON)}, divided by its weight):")
     for key, weight in weights.items():
-        median = np.mean([_median(scans.channel(t, key)["clean"]) for t in V3_CHOSEN_ON])
-        print(f"- {key}: {median / weight:.6f}")
+        print(f"- {key}: {scans.median(key, V3_CHOSEN_ON) / weight:.6f}")
 
 
 def _distances(name: str, vectors: np.ndarray) -> np.ndarray:

@@ -86,15 +86,15 @@ def partial_vectors(mesh: Mesh, params: Params) -> np.ndarray:
     curvature_columns(params)
     assert params.version is not None  # checked by curvature_columns
     design = DESIGNS[params.version]
+    whole = operators(mesh, params.mollify)
     if not design.curvature_on_copy:
-        return _share_vectors(operators(mesh, params.mollify), design, SHARES)
+        return _share_vectors(whole, design, SHARES)
     # The wholes' curvature is measured on copies of `coarse` faces (`cfsig.cfhks`): a part
     # that is a share f of its whole is simplified to f times as many.
     rows = []
     for share in SHARES:
         copy = simplified_mesh(mesh, round(design.coarse * share))
-        ops = operators(copy) if copy is not None else operators(mesh, params.mollify)
-        rows.append(_share_vectors(ops, design, (share,)))
+        rows.append(_share_vectors(whole if copy is None else operators(copy), design, (share,)))
     return np.concatenate(rows)
 
 
