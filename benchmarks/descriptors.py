@@ -6,6 +6,7 @@ Stages (each prints Markdown for docs/descriptors.md; run from the repository ro
     python benchmarks/descriptors.py study      # how version 2 was chosen: leave one collection out
     python benchmarks/descriptors.py study3     # how version 3 was chosen
     python benchmarks/descriptors.py study7     # how version 7 was chosen: scans and models
+    python benchmarks/descriptors.py study8     # how version 8 was chosen: version 7 for less
     python benchmarks/descriptors.py divisor    # a version's curvature divisor (version 3's rule)
     python benchmarks/descriptors.py tolerance  # version 6's conjugate gradients' tolerance
     python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all nine
@@ -112,6 +113,7 @@ DESCRIPTORS = {
     "cfhks 5": Params(descriptor="cfhks", version=5),
     "cfhks 6": Params(descriptor="cfhks", version=6),
     "cfhks 7": Params(descriptor="cfhks", version=7),
+    "cfhks 8": Params(descriptor="cfhks", version=8),
 }
 NAMES = (*DESCRIPTORS, "ShapeDNA")
 V2 = cfhks.DESIGNS[2]
@@ -502,19 +504,20 @@ def noise(args: argparse.Namespace) -> None:
 
 # --- version 7: chosen for scans as well as models -------------------------------------------
 
+V7_FACES = 4000  # faces of version 7's copy, versions 4-6's
 V7_PAIRS = (30, 45, 60)  # eigenpairs of the copy's spectrum, the heat computed from them
 V7_HEAT_WEIGHTS = (1.0, 2.0, 3.0)  # the heat channel's weight, the spectrum's being 1
 V7_QUERIES = ("clean", "noise")  # the queries whose first tiers the choice averages
 SCAN_QUERIES = ("clean", "light-noise", "noise", "remesh")  # reported for the chosen version
 
 
-def _study7_one(item: tuple[Path, int]) -> dict:
+def _study7_one(item: tuple[Path, int], faces: int = V7_FACES) -> dict:
     """Version 7's candidate channels of one mesh and of its scan-like copies (messy.py's
-    kinds, seeded by the mesh's index), all on the simplified copy, unweighted: per count of
-    `V7_PAIRS`, the log spectrum and the heat quantiles; the curvature histograms at every
-    scale of `LADDER`."""
+    kinds, seeded by the mesh's index), all on the copy simplified to ``faces`` faces,
+    unweighted: per count of `V7_PAIRS`, the log spectrum and the heat quantiles; the curvature
+    histograms at every scale of `LADDER`."""
     path, seed = item
-    design = cfhks.DESIGNS[6]
+    design = replace(cfhks.DESIGNS[6], coarse=faces)
     mesh = repair_mesh(read_mesh(path))
     row: dict = {}
     for kind in SCAN_QUERIES:
@@ -539,17 +542,21 @@ def _study7_one(item: tuple[Path, int]) -> dict:
     return row
 
 
-def _study7_cache(args: argparse.Namespace) -> dict[str, dict[str, np.ndarray]]:
-    """`_study7_one` of every mesh of the three collections, cached under ``--cache``."""
+def _study7_cache(
+    args: argparse.Namespace, faces: int = V7_FACES
+) -> dict[str, dict[str, np.ndarray]]:
+    """`_study7_one` of every mesh of the three collections with copies of ``faces`` faces,
+    cached under ``--cache``."""
     data = {}
     for name in COLLECTIONS:
-        cache = args.cache / f"study7-{name}.npz"
+        suffix = "" if faces == V7_FACES else f"-{faces}"
+        cache = args.cache / f"study7-{name}{suffix}.npz"
         if not cache.exists():
             args.cache.mkdir(parents=True, exist_ok=True)
             paths = _paths(args.data_root, name)
             with ProcessPoolExecutor(args.jobs) as pool:
                 items = [(p, i) for i, p in enumerate(paths)]
-                rows = list(pool.map(_study7_one, items, chunksize=4))
+                rows = list(pool.map(partial(_study7_one, faces=faces), items, chunksize=4))
             arrays = {key: np.array([row[key] for row in rows]) for key in rows[0]}
             np.savez(cache, labels=[p.parent.name for p in paths], **arrays)
         data[name] = dict(np.load(cache))
@@ -650,15 +657,7 @@ def study7(args: argparse.Namespace) -> None:
     collection out, then on version 3's training collections; with the chosen candidate's
     divisors and its first tiers for every kind of scan-like query."""
     scans = Scans(_study7_cache(args))
-    header = " | ".join(f"{c} {q}" for c in COLLECTIONS for q in V7_QUERIES)
-    print(f"| left out | candidate | {header} |\n|---|---|" + "---|" * 6)
-    for left_out in COLLECTIONS:
-        train = tuple(c for c in COLLECTIONS if c != left_out)
-        weights, _ = scans.choose(train)
-        ft = scans.first_tiers(weights, train, V7_QUERIES)
-        cells = [f"**{ft[c, q]:.3f}**" if c == left_out else f"{ft[c, q]:.3f}"
-                 for c in COLLECTIONS for q in V7_QUERIES]  # fmt: skip
-        print(f"| {left_out} | {_candidate_text(weights)} | " + " | ".join(cells) + " |")
+    _left_out_table(scans, V7_PAIRS)
     scored = scans.scores(V3_CHOSEN_ON)
     weights, score = max(scored, key=lambda item: item[1])
     print(f"\nChosen on {' and '.join(V3_CHOSEN_ON)} (mean FT {score:.3f}): "
@@ -667,21 +666,163 @@ def study7(args: argparse.Namespace) -> None:
     print("\n| eigenpairs | candidate | mean FT | " + " | ".join(COLLECTIONS) + " (clean) |")
     print("|---|---|---|" + "---|" * 3)
     for pairs in V7_PAIRS:
-        best, mean = max(
-            (item for item in scored if f"spectrum {pairs}" in item[0]), key=lambda item: item[1]
-        )
+        best, mean = _best_of(scored, pairs)
         ft = scans.first_tiers(best, V3_CHOSEN_ON, ("clean",))
         cells = " | ".join(f"{ft[c, 'clean']:.3f}" for c in COLLECTIONS)
         print(f"| {pairs} | {_candidate_text(best)} | {mean:.3f} | {cells} |")
-    print()
-    ft = scans.first_tiers(weights, V3_CHOSEN_ON, SCAN_QUERIES)
-    print("| collection | " + " | ".join(SCAN_QUERIES) + " |\n|---|" + "---|" * 4)
-    for c in COLLECTIONS:
-        print(f"| {c} | " + " | ".join(f"{ft[c, q]:.3f}" for q in SCAN_QUERIES) + " |")
+    _scan_table(scans, weights)
+    _divisors(scans, weights)
+
+
+def _divisors(scans: Scans, weights: dict[str, float]) -> None:
+    """Print a candidate's divisors as `cfsig.cfhks.DESIGNS` records them."""
     print("\nDivisors (each channel's median clean distance over the pairs, averaged over")
     print(f"{' and '.join(V3_CHOSEN_ON)}, divided by its weight):")
     for key, weight in weights.items():
         print(f"- {key}: {scans.median(key, V3_CHOSEN_ON) / weight:.6f}")
+
+
+def _left_out_table(scans: Scans, pairs: tuple[int, ...]) -> None:
+    """Print the candidate chosen with each collection left out, among those of ``pairs``
+    eigenpairs, and its first tiers (the left-out collection's in bold)."""
+    header = " | ".join(f"{c} {q}" for c in COLLECTIONS for q in V7_QUERIES)
+    print(f"| left out | candidate | {header} |\n|---|---|" + "---|" * 6)
+    for left_out in COLLECTIONS:
+        train = tuple(c for c in COLLECTIONS if c != left_out)
+        weights, _ = max(
+            (item for item in scans.scores(train) if _pairs_of(item[0]) in pairs),
+            key=lambda item: item[1],
+        )
+        ft = scans.first_tiers(weights, train, V7_QUERIES)
+        cells = [f"**{ft[c, q]:.3f}**" if c == left_out else f"{ft[c, q]:.3f}"
+                 for c in COLLECTIONS for q in V7_QUERIES]  # fmt: skip
+        print(f"| {left_out} | {_candidate_text(weights)} | " + " | ".join(cells) + " |")
+
+
+def _scan_table(scans: Scans, weights: dict[str, float]) -> None:
+    """Print a candidate's first tiers for every kind of scan-like query."""
+    ft = scans.first_tiers(weights, V3_CHOSEN_ON, SCAN_QUERIES)
+    print("\n| collection | " + " | ".join(SCAN_QUERIES) + " |\n|---|" + "---|" * 4)
+    for c in COLLECTIONS:
+        print(f"| {c} | " + " | ".join(f"{ft[c, q]:.3f}" for q in SCAN_QUERIES) + " |")
+
+
+def _pairs_of(weights: dict[str, float]) -> int:
+    """The number of eigenpairs of a version 7 candidate."""
+    return next(int(key.split()[1]) for key in weights if key.startswith("spectrum"))
+
+
+def _best_of(
+    scored: list[tuple[dict[str, float], float]], pairs: int
+) -> tuple[dict[str, float], float]:
+    """The best-scored candidate with ``pairs`` eigenpairs, and its score."""
+    return max((item for item in scored if _pairs_of(item[0]) == pairs), key=lambda item: item[1])
+
+
+# --- version 8: version 7's channels, the copy and the eigenpairs chosen with their cost -------
+
+V8_FACES = (1000, 2000, V7_FACES)  # faces of the candidate copies
+# The cheapest candidate within this of the best mean FT is chosen, as version 4's copy was,
+# among those that meet the issue's quality bars on the training collections (`_meets_bars`).
+V8_MARGIN = 0.01
+
+
+def _candidate_design(scans: Scans, weights: dict[str, float], faces: int) -> cfhks.Design:
+    """A version 7 candidate as a `cfhks.Design` on a copy of ``faces`` faces: each channel's
+    divisor is its median clean distance over `V3_CHOSEN_ON`'s pairs divided by its weight,
+    per entry as `cfhks.weigh` divides."""
+    design = cfhks.DESIGNS[7]
+    divisor = {key.split()[0]: scans.median(key, V3_CHOSEN_ON) / w for key, w in weights.items()}
+    scales = next(key.split()[1] for key in weights if key.startswith("curvature"))
+    chosen = tuple(LADDER[int(j)] for j in scales.split(","))
+    pairs = _pairs_of(weights)
+    return replace(
+        design,
+        coarse=faces,
+        eigenpairs=pairs,
+        spectrum=divisor["spectrum"] / pairs,
+        heat=(divisor["heat"] / cfhks.QUANTILES,) * len(design.times),
+        scales=chosen,
+        curvature=divisor["curvature"] * len(chosen) / design.bins,
+    )
+
+
+def _candidate_seconds(path: Path, designs: list[cfhks.Design]) -> list[float]:
+    """CPU seconds of each design's vector of one repaired mesh: the copy, its operators, its
+    spectrum and the channels (reading and repair, alike for every design, left out)."""
+    mesh = repair_mesh(read_mesh(path))
+    seconds = []
+    for design in designs:
+        start = time.process_time()
+        copy = simplified_mesh(mesh, design.coarse)
+        ops = operators(mesh if copy is None else copy)
+        spectrum, surface = cfhks.spectrum_of(ops, count=design.eigenpairs)
+        cfhks.weigh(cfhks.channels(surface, spectrum, design), design)
+        seconds.append(time.process_time() - start)
+    return seconds
+
+
+def _meets_bars(scans: Scans, weights: dict[str, float], shapedna: dict[str, float]) -> bool:
+    """Whether a candidate's clean queries meet issue 14's quality bars on the training
+    collections: FT at least ShapeDNA's + 0.02 on each, and on SHREC 2007 NN >= 0.90 and FT
+    >= 0.60."""
+    reports = {
+        c: _report(scans.combined(c, weights, V3_CHOSEN_ON)["clean"], scans.data[c]["labels"])
+        for c in V3_CHOSEN_ON
+    }
+    ft = {c: r.measures["FT"] for c, r in reports.items()}
+    shrec = reports["shrec07"].measures
+    return (
+        all(ft[c] >= shapedna[c] + 0.02 for c in V3_CHOSEN_ON)
+        and shrec["NN"] >= 0.90
+        and shrec["FT"] >= 0.60
+    )
+
+
+def study8(args: argparse.Namespace) -> None:
+    """Version 8's choice: version 7's candidates on copies of each of `V8_FACES` faces, the
+    best of each copy and number of eigenpairs by version 7's objective, timed on every
+    ``--every``-th SHREC 2007 mesh; the cheapest within `V8_MARGIN` of the best that meets the
+    quality bars on the training collections is chosen (ShapeDNA's FT from ``measure``'s
+    cache)."""
+    measured = _load(args.cache)
+    shapedna = {c: _ft("ShapeDNA", measured[c]) for c in V3_CHOSEN_ON}
+    rows = []
+    for faces in V8_FACES:
+        scans = Scans(_study7_cache(args, faces))
+        scored = scans.scores(V3_CHOSEN_ON)
+        for pairs in V7_PAIRS:
+            weights, mean = _best_of(scored, pairs)
+            rows.append((faces, pairs, scans, weights, mean))
+    designs = [_candidate_design(scans, w, faces) for faces, _, scans, w, _ in rows]
+    paths = sorted(_paths(args.data_root, "shrec07"), key=lambda p: int(p.stem))[:: args.every]
+    seconds = np.median([_candidate_seconds(path, designs) for path in paths], axis=0)
+    best = max(mean for *_, mean in rows)
+    bars = [_meets_bars(scans, weights, shapedna) for _, _, scans, weights, _ in rows]
+    chosen = min(
+        (i for i, row in enumerate(rows) if row[-1] >= best - V8_MARGIN and bars[i]),
+        key=lambda i: seconds[i],
+    )
+    print(f"Best candidate of each copy and number of eigenpairs, chosen on "
+          f"{' and '.join(V3_CHOSEN_ON)}; CPU ms per mesh: median over {len(paths)} SHREC 2007 "
+          "meshes of the copy, its spectrum and the channels:\n")  # fmt: skip
+    columns = " | ".join(COLLECTIONS)
+    print(f"| copy faces | eigenpairs | candidate | mean FT | {columns} (clean) | bars | CPU ms |")
+    print("|---|---|---|---|" + "---|" * 5)
+    for i, (faces, pairs, scans, weights, mean) in enumerate(rows):
+        ft = scans.first_tiers(weights, V3_CHOSEN_ON, ("clean",))
+        cells = " | ".join(f"{ft[c, 'clean']:.3f}" for c in COLLECTIONS)
+        mark = " (chosen)" if i == chosen else ""
+        print(f"| {faces}{mark} | {pairs} | {_candidate_text(weights)} | {mean:.3f} | {cells} "
+              f"| {'yes' if bars[i] else 'no'} | {1000 * seconds[i]:.1f} |")  # fmt: skip
+    faces, pairs, scans, weights, mean = rows[chosen]
+    print("\nShapeDNA's FT: " + ", ".join(f"{c} {v:.3f}" for c, v in shapedna.items()))
+    print(f"\nBest mean FT {best:.3f}; chosen: the cheapest within {V8_MARGIN} of it that meets "
+          f"the bars on {' and '.join(V3_CHOSEN_ON)}, a copy of {faces} faces with {pairs} "
+          f"eigenpairs (mean FT {mean:.3f}).\n")  # fmt: skip
+    _left_out_table(scans, (pairs,))
+    _scan_table(scans, weights)
+    _divisors(scans, weights)
 
 
 def _distances(name: str, vectors: np.ndarray) -> np.ndarray:
@@ -954,6 +1095,7 @@ def main() -> None:
         "study": study,
         "study3": study3,
         "study7": study7,
+        "study8": study8,
         "divisor": divisor,
         "tolerance": tolerance,
         "noise": noise,

@@ -40,6 +40,7 @@ Versions (`Params.version`; an index stores its own, and a query recomputes with
 7. Every channel on the simplified copy, chosen for noisy scans as well as clean models: 60
    eigenpairs (the heat from all 60) and the curvature at 0.00025 to 0.016 (quadrupling),
    scales at which vertex noise no longer moves it; divisors from SHREC 2007's and FAUST's pairs.
+8. Version 7 with 45 eigenpairs, at three quarters of its eigenproblem's cost.
 
 Only version 1's vector holds phi, so only version 1 solves for it (`solves_phi`); the others
 factorise the Laplacian of the mesh, or of its copy, for the spectrum alone.
@@ -165,6 +166,17 @@ DESIGNS[7] = replace(
     curvature=0.512178 * len(_V7_SCALES) / DESIGNS[6].bins,
     eigenpairs=60,
     curvature_on_copy=True,
+)
+# Version 8: version 7 with 45 eigenpairs, the cheapest candidate within 0.01 of version 7's
+# objective that meets issue 14's quality bars on SHREC 2007 and FAUST, chosen among copies of
+# 1000, 2000 and 4000 faces and 30, 45 and 60 eigenpairs by `python benchmarks/descriptors.py
+# study8` (docs/descriptors.md, "Version 8"; docs/method.md, section 16): the same scales and
+# weights, its own spectrum's and heat's medians.
+DESIGNS[8] = replace(
+    DESIGNS[7],
+    spectrum=5.602376 / 45,
+    heat=(63.188313 / QUANTILES,) * len(_V2_TIMES),
+    eigenpairs=45,
 )
 
 
@@ -303,15 +315,23 @@ def spectrum_of(
         The mesh's factorisation or eigenvalue iteration failed.
     """
     if coarse is not None:
-        copy = operators(coarse)
-        try:
-            factor = factorize_laplacian(copy.laplacian, copy.labels, solver)
-            return _eigenpairs(copy, factor, count), copy
-        except SolverError:
-            pass  # a copy the simplification left unsolvable: the spectrum of the mesh itself
+        found = _copy_spectrum(coarse, solver, count)
+        if found is not None:
+            return found
     if solve is None:
         solve = factorize_laplacian(ops.laplacian, ops.labels, solver)
     return _eigenpairs(ops, solve, count), ops
+
+
+def _copy_spectrum(coarse: Mesh, solver: str, count: int) -> tuple[Spectrum, Operators] | None:
+    """The spectrum of a simplified copy, with its own factorisation, and the copy's operators;
+    None when the copy cannot be solved (the simplification left it degenerate)."""
+    copy = operators(coarse)
+    try:
+        factor = factorize_laplacian(copy.laplacian, copy.labels, solver)
+        return _eigenpairs(copy, factor, count), copy
+    except SolverError:
+        return None
 
 
 def _eigenpairs(ops: Operators, solve: Callable[[np.ndarray], np.ndarray], count: int) -> Spectrum:
@@ -439,6 +459,42 @@ def cfhks_vector(
     phi = cf.phi if cf is not None and solves_phi(version) else None  # else weigh drops it
     on = surface if design.curvature_on_copy else ops
     return weigh(channels(on, spectrum, design, phi), design)
+
+
+def copy_vector(mesh: Mesh, version: int, solver: str = "auto") -> np.ndarray | None:
+    """The ``cfhks`` descriptor of a mesh from its simplified copy alone, for the versions whose
+    channels are all on the copy: the mesh's own operators are not needed.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The mesh.
+    version : int
+        A key of `DESIGNS`.
+    solver : {"auto", "cholmod", "eigen", "scipy"}
+        Sparse solver backend of the copy's factorisation.
+
+    Returns
+    -------
+    vector : (DESIGNS[version].length,) float64 or None
+        As `cfhks_vector` returns; None when the version computes a channel on the mesh itself,
+        the mesh has no more faces than the copy would, or the copy cannot be solved: then
+        `cfhks_vector` with the mesh's operators gives the vector.
+
+    Raises
+    ------
+    SolverError
+        The eigenvalue iteration or a curvature diffusion of the copy failed.
+    """
+    design = DESIGNS[version]
+    if not (design.coarse and design.curvature_on_copy):
+        return None
+    coarse = simplified_mesh(mesh, design.coarse)
+    found = None if coarse is None else _copy_spectrum(coarse, solver, design.eigenpairs)
+    if found is None:
+        return None
+    spectrum, surface = found
+    return weigh(channels(surface, spectrum, design), design)
 
 
 def solves_phi(version: int) -> bool:

@@ -7,7 +7,7 @@ from dataclasses import asdict, dataclass, fields, replace
 
 DESCRIPTORS = ("cf", "cfhks")
 # The versions of each descriptor, the last one the default (docs/descriptors.md).
-VERSIONS = {"cf": (1,), "cfhks": (1, 2, 3, 4, 5, 6, 7)}
+VERSIONS = {"cf": (1,), "cfhks": (1, 2, 3, 4, 5, 6, 7, 8)}
 REPAIR_MODES = ("auto", "off", "proxy")
 # The length of the cfhks vector per version, `cfsig.cfhks.DESIGNS[version].length`
 # (tests/test_cfhks.py checks that the two agree), here so that an index needs no SciPy.
@@ -19,6 +19,7 @@ CFHKS_LENGTHS = {
     5: 30 + 64 * 8 + 49 * 4,
     6: 30 + 64 * 8 + 49 * 4,
     7: 60 + 64 * 8 + 49 * 4,
+    8: 45 + 64 * 8 + 49 * 4,
 }
 SOLVERS = ("auto", "cholmod", "eigen", "scipy")  # sparse solver backends (`cfsig.conformal`)
 

@@ -15,9 +15,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .cfhks import cfhks_vector, solves_phi
+from .cfhks import cfhks_vector, copy_vector, solves_phi
 from .conformal import ConformalFactor, Operators, conformal_factor, operators
 from .errors import MeshError, SolverError
+from .geometry import components, edge_graph
 from .mesh import Mesh, parse_mesh, read_bytes
 from .params import Params
 from .repair import repair_mesh
@@ -241,27 +242,34 @@ def _repair_and_sign(mesh: Mesh, params: Params, solver: str, phi: bool) -> tupl
     """`compute_signature`, also returning the repaired mesh that phi lives on."""
     start = time.perf_counter()
     mesh = repair_mesh(mesh, params.repair)
-    cf = None
-    if phi or needs_phi(params):
-        cf = conformal_factor(mesh, params.mollify, solver)
-        ops = cf.operators
-    else:
-        ops = operators(mesh, params.mollify)
-    vector = signature_of(mesh, ops, params, cf, solver)
-    repairs = mesh.repairs
-    if ops.mollified > 0:
-        repairs += (f"mollified degenerate triangles (edges +{ops.mollified:.3g})",)
+    cf = conformal_factor(mesh, params.mollify, solver) if phi or needs_phi(params) else None
+    ops, vector, repairs = None, None, mesh.repairs
+    if cf is None and params.descriptor == "cfhks":
+        assert params.version is not None  # resolved by Params.__post_init__
+        vector = copy_vector(mesh, params.version, solver)  # no need for the mesh's operators
+    if vector is None:
+        ops = operators(mesh, params.mollify) if cf is None else cf.operators
+        vector = signature_of(mesh, ops, params, cf, solver)
+        if ops.mollified > 0:
+            repairs += (f"mollified degenerate triangles (edges +{ops.mollified:.3g})",)
     return mesh, Signature(
         vector,
         None if cf is None else cf.phi,
         len(mesh.vertices),
         len(mesh.faces),
-        ops.n_components,
+        _component_count(mesh) if ops is None else ops.n_components,
         float("nan") if cf is None else cf.curvature_error,
         repairs,
         mesh.route,
         time.perf_counter() - start,
     )
+
+
+def _component_count(mesh: Mesh) -> int:
+    """The number of connected components of a mesh, as `conformal.operators` counts them."""
+    if mesh.parts is not None:
+        return int(mesh.parts.max()) + 1
+    return components(edge_graph(mesh.faces, len(mesh.vertices)))[0]
 
 
 def signature_file(path: str | os.PathLike, params: Params, solver: str = "auto") -> Signature:

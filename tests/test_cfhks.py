@@ -285,22 +285,38 @@ def test_version_6_is_version_5_with_the_curvature_solved_more_loosely():
     assert np.abs(v6[head:] - v5[head:]).sum() < 0.05 * np.abs(other[head:] - v6[head:]).sum()
 
 
-def test_version_7_computes_every_channel_on_the_simplified_copy():
-    """60 eigenpairs and the curvature at version 7's scales, all of the copy."""
+@pytest.mark.parametrize(("version", "pairs"), [(7, 60), (8, 45)])
+def test_versions_7_and_8_compute_every_channel_on_the_simplified_copy(version, pairs):
+    """Their eigenpairs and the curvature at their scales, all of the copy."""
     mesh = clean_mesh(*_fine_bumpy())
-    design = cfhks.DESIGNS[7]
+    design = cfhks.DESIGNS[version]
     copy = simplify.simplified_mesh(mesh, design.coarse)
     assert copy is not None and len(copy.vertices) < len(mesh.vertices)
-    vector = compute_signature(mesh, Params(descriptor="cfhks", version=7)).vector
+    vector = compute_signature(mesh, Params(descriptor="cfhks", version=version)).vector
     ops = operators(copy)
     spectrum, surface = cfhks.spectrum_of(ops, count=design.eigenpairs)
-    assert surface is ops and len(spectrum.eigenvalues) == 60
+    assert surface is ops and len(spectrum.eigenvalues) == pairs
     assert np.allclose(vector, cfhks.weigh(cfhks.channels(ops, spectrum, design), design))
     on_mesh = replace(design, curvature_on_copy=False)
     columns = cfhks.channel_columns(design)["curvature"]
     full = conformal_factor(mesh).operators
     moved = cfhks.weigh(cfhks.channels(full, spectrum, on_mesh), on_mesh)
     assert not np.allclose(vector[columns], moved[columns])
+
+
+def test_a_copy_only_version_needs_not_the_mesh_operators_and_counts_its_components():
+    """Versions 7 and later skip the mesh's own operators when the copy exists: same vector as
+    through them, same component count."""
+    v, f = _fine_bumpy()
+    mesh = clean_mesh(np.vstack([v, v + [9.0, 0.0, 0.0]]), np.vstack([f, f + len(v)]))
+    version = max(VERSIONS["cfhks"])
+    sig = compute_signature(mesh, Params(descriptor="cfhks", version=version, repair="off"))
+    ops = operators(mesh)
+    assert sig.n_components == ops.n_components == 2
+    assert np.array_equal(sig.vector, cfhks.cfhks_vector(mesh, ops, version))
+    assert cfhks.copy_vector(mesh, 6) is None  # version 6's curvature is on the mesh itself
+    small = clean_mesh(*_bumpy())
+    assert cfhks.copy_vector(small, version) is None  # nothing to simplify
 
 
 def test_an_index_of_the_default_keeps_no_phi_and_checks_clean(collection, tmp_path):
