@@ -13,7 +13,7 @@ Stages (each prints Markdown for docs/descriptors.md; run from the repository ro
     python benchmarks/descriptors.py cost       # whole `cfsig index` runs: default, cf, ShapeDNA
     python benchmarks/descriptors.py noise      # which curvature scales survive vertex noise
     python benchmarks/descriptors.py coarse     # version 4: the spectrum of a simplified copy
-    python benchmarks/descriptors.py stages     # CPU seconds of each stage of versions 3 to 6
+    python benchmarks/descriptors.py stages     # CPU seconds of each stage of versions 3 to 8
 
 ``measure`` computes, for every mesh of the three collections (``--data-root``, where
 ``../shared/data/unpack`` puts them), nine descriptors from the file, each timed in CPU seconds
@@ -88,7 +88,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from cfsig import cfhks
-from cfsig.conformal import conformal_factor, factorize, operators
+from cfsig.conformal import conformal_factor, factorize, factorize_laplacian, operators
 from cfsig.curvature import smoothed_curvature
 from cfsig.measures import RetrievalReport, evaluate_distances
 from cfsig.mesh import clean_mesh, read_mesh
@@ -96,7 +96,7 @@ from cfsig.params import VERSIONS, Params
 from cfsig.repair import repair_mesh
 from cfsig.signature import signature_file
 from cfsig.simplify import simplified_mesh
-from cfsig.spectrum import Spectrum
+from cfsig.spectrum import Spectrum, laplace_spectrum
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA_ROOT = ROOT.parent / "shared" / "data"
@@ -997,7 +997,7 @@ def coarse(args: argparse.Namespace) -> None:
 
 
 def _stages_one(path: Path) -> dict[str, float]:
-    """CPU seconds of each stage of versions 3 to 6 on one mesh; the curvature's agreement with
+    """CPU seconds of each stage of versions 3 to 8 on one mesh; the curvature's agreement with
     four sparse factorisations; and how far version 5's looser conjugate gradients move its
     curvature histograms."""
     design, v5, v6 = cfhks.DESIGNS[4], cfhks.DESIGNS[5], cfhks.DESIGNS[6]
@@ -1042,6 +1042,27 @@ def _stages_one(path: Path) -> dict[str, float]:
         "spectrum and heat, copy",
         lambda: cfhks.channels(ops, cfhks.spectrum_of(ops, copy)[0], heat),
     )
+    v8 = cfhks.DESIGNS[8]
+    surface = timed("the copy's operators", lambda: ops if copy is None else operators(copy))
+    solve = timed(
+        "the copy's factorisation",
+        lambda: factorize_laplacian(surface.laplacian, surface.labels, "auto"),
+    )
+    for pairs, label in ((60, "version 7"), (v8.eigenpairs, "version 8")):
+        spectrum = timed(
+            f"the copy's spectrum, {pairs} eigenpairs ({label})",
+            lambda pairs=pairs: laplace_spectrum(
+                surface.laplacian, surface.vertex_area, surface.labels, solve, pairs
+            ),
+        )
+    timed(
+        "the copy's curvature (versions 7 and 8)",
+        lambda: smoothed_curvature(surface, v8.scales, v8.tolerance, v8.predict),
+    )
+    timed(
+        "heat and quantiles of version 8's spectrum",
+        lambda: cfhks.channels(surface, spectrum, replace(v8, scales=())),
+    )
     seconds["difference"] = float(np.abs(values - exact).max() / np.abs(exact).max())
     for key, bins in (("moved", v5.bins), ("moved, 48 bins", design.bins)):
         tight, near = (
@@ -1052,7 +1073,7 @@ def _stages_one(path: Path) -> dict[str, float]:
 
 
 def stages(args: argparse.Namespace) -> None:
-    """CPU seconds of each stage of versions 3 to 6, summed over every k-th mesh of SHREC 2007
+    """CPU seconds of each stage of versions 3 to 8, summed over every k-th mesh of SHREC 2007
     (the cost stage's 40) and of FAUST."""
     table: dict[str, list[float]] = {}
     difference, moved = 0.0, {"moved": [], "moved, 48 bins": []}
