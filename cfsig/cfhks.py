@@ -427,9 +427,10 @@ def cfhks_vector(
     Parameters
     ----------
     mesh : Mesh
-        The mesh, simplified for the spectrum when the version has a ``coarse`` copy.
+        The mesh, simplified for the spectrum (and, from version 7, every channel: `copy_vector`)
+        when the version has a ``coarse`` copy.
     ops : Operators
-        Its operators (`cfsig.conformal.operators`).
+        Its operators (`cfsig.conformal.operators`), for the channels not on the copy.
     version : int
         A key of `DESIGNS`.
     cf : ConformalFactor or None
@@ -453,12 +454,18 @@ def cfhks_vector(
     design = DESIGNS[version]
     if solves_phi(version) and cf is None:
         raise ValueError(f"cfhks version {version} holds phi: give its conformal factor")
-    coarse = simplified_mesh(mesh, design.coarse) if design.coarse else None
+    vector = copy_vector(mesh, version, solver)
+    if vector is not None:
+        return vector
+    # Versions 4 to 6 take the spectrum from the copy; a version with every channel on the copy
+    # gets here only without a usable copy, and takes the mesh itself.
+    coarse = None
+    if design.coarse and not design.curvature_on_copy:
+        coarse = simplified_mesh(mesh, design.coarse)
     solve = None if cf is None else cf.solve
-    spectrum, surface = spectrum_of(ops, coarse, solve, solver, design.eigenpairs)
+    spectrum, _ = spectrum_of(ops, coarse, solve, solver, design.eigenpairs)
     phi = cf.phi if cf is not None and solves_phi(version) else None  # else weigh drops it
-    on = surface if design.curvature_on_copy else ops
-    return weigh(channels(on, spectrum, design, phi), design)
+    return weigh(channels(ops, spectrum, design, phi), design)
 
 
 def copy_vector(mesh: Mesh, version: int, solver: str = "auto") -> np.ndarray | None:
