@@ -31,6 +31,11 @@ queries and of noisy copies of them against the clean meshes, and prints the bes
 each number of eigenpairs, the channel that sets the cost; its own cache of candidate channels,
 for every mesh and its scan-like copies, goes under ``--cache`` too.
 
+``study8`` chooses version 8: ``study7``'s candidates on copies of 1000, 2000 and 4000 faces (a
+cache of each), the best of each copy and number of eigenpairs timed on every ``--every``-th
+SHREC 2007 mesh, and the cheapest within 0.01 of the best that meets the issue's quality bars
+on the training collections (ShapeDNA's first tier from ``measure``'s cache).
+
 ``study`` chooses the channel weights and heat times over a small grid, each candidate's
 channel divisors being the medians of its channel distances averaged over the training
 collections (label-free), by the mean first tier (FT) on the training collections: once for each
@@ -635,10 +640,6 @@ class Scans:
             scored.append((weights, float(np.mean([ft[c, q] for c in train for q in V7_QUERIES]))))
         return scored
 
-    def choose(self, train: tuple[str, ...]) -> tuple[dict[str, float], float]:
-        """The candidate with the best mean FT over ``train`` and `V7_QUERIES`, and that mean."""
-        return max(self.scores(train), key=lambda item: item[1])
-
 
 def _candidate_text(weights: dict[str, float]) -> str:
     """A version 7 candidate in words."""
@@ -1131,14 +1132,14 @@ def main() -> None:
     parser.add_argument("--cache", type=Path, default=CACHE, help="folder of the caches")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes of measure")
     parser.add_argument(
-        "--every", type=int, default=10, help="cost, stages: every k-th SHREC07 mesh"
+        "--every", type=int, default=10, help="cost, stages, study8: every k-th SHREC07 mesh"
     )
     parser.add_argument(
         "--only", nargs="+", choices=DESCRIPTORS, help="measure: these descriptors only"
     )
     parser.add_argument("--rounds", type=int, default=3, help="cost: rounds of timings")
     parser.add_argument(
-        "--version", type=int, default=6, help="divisor: cfhks version, 3 to 6 (7: study7)"
+        "--version", type=int, default=6, help="divisor: cfhks version, 3 to 6 (7, 8: study7, 8)"
     )
     parser.add_argument(
         "--faces", type=int, nargs="+", default=[2000, 4000, 8000], help="coarse: copies' faces"
