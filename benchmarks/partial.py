@@ -23,7 +23,7 @@ whole shape (its default ``cfhks`` signature, what ``cfsig query`` does), by the
 the curvature channel alone (`cfsig.parts.partial_distances`), and as ``cfsig query --partial``
 ranks (`cfsig.parts.expanded_distances`). It also lists SHREC 2007's genus outliers, the meshes
 whose Euler characteristic is not their class's most common one, with their first tier (FT)
-against the other queries of their classes, for ``cfhks`` versions 2 to 5 and the default, for
+against the other queries of their classes, for every ``cfhks`` version from 2 to the default, for
 each channel of the default alone, and for ShapeDNA (`descriptors.shapedna`, lapy: the
 ``bench`` extra): whether any of them ranks the outliers as well as their classes' others.
 """
@@ -55,7 +55,7 @@ from cfsig.geometry import mesh_edges
 from cfsig.measures import evaluate_distances, evaluate_queries
 from cfsig.mesh import Mesh, clean_mesh, read_mesh
 from cfsig.nearest import l1_distances
-from cfsig.params import Params
+from cfsig.params import VERSIONS, Params
 from cfsig.parts import expanded_distances, partial_distances, partial_vectors
 from cfsig.signature import compute_signature
 
@@ -63,10 +63,8 @@ ROOT = Path(__file__).resolve().parents[1]
 COLLECTIONS = ("shrec07", "mcgill", "faust")
 KINDS = ("cut", "holes", "scan")
 DEFAULT = Params(descriptor="cfhks")  # the latest version
-V5 = Params(descriptor="cfhks", version=5)
-V4 = Params(descriptor="cfhks", version=4)
-V3 = Params(descriptor="cfhks", version=3)
-V2 = Params(descriptor="cfhks", version=2)
+# The earlier versions of the genus table (SHREC 2007 only).
+EARLIER = tuple(v for v in VERSIONS["cfhks"] if 2 <= v < (DEFAULT.version or 0))
 MEASURES = ("NN", "FT", "mAP")
 MARKER = "<!-- measured: what follows is written by benchmarks/partial.py -->"
 
@@ -163,16 +161,15 @@ def _one(item: tuple[Path, int, bool]) -> dict:
     mesh = read_mesh(path)
     row: dict = {
         "default": compute_signature(mesh, DEFAULT).vector,
-        "v5": compute_signature(mesh, V5).vector,
-        "v4": compute_signature(mesh, V4).vector,
-        "v3": compute_signature(mesh, V3).vector,
-        "v2": compute_signature(mesh, V2).vector,
         "chi": len(mesh.vertices)
         - len(mesh_edges(mesh.faces, len(mesh.vertices)).ends)
         + len(mesh.faces),
     }
     if genus:
         row["ShapeDNA"] = shapedna(path)
+        for version in EARLIER:
+            params = Params(descriptor="cfhks", version=version)
+            row[f"v{version}"] = compute_signature(mesh, params).vector
     for kind, make in (("cut", cut), ("holes", holes), ("scan", scan)):
         part = make(mesh, rng)
         row[f"{kind} share"] = _area(part).sum() / _area(mesh).sum()
@@ -258,7 +255,7 @@ def _genus_table(data: dict) -> list[str]:
     default = data["default"]
     distances = {
         f"cfhks {version}": l1_distances(data[f"v{version}"], data[f"v{version}"])
-        for version in (2, 3, 4, 5)
+        for version in EARLIER
     }
     distances[f"cfhks {DEFAULT.version}"] = l1_distances(default, default)
     for channel, columns in cfhks.channel_columns(cfhks.DESIGNS[DEFAULT.version]).items():
