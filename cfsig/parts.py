@@ -86,15 +86,21 @@ def partial_vectors(mesh: Mesh, params: Params) -> np.ndarray:
     curvature_columns(params)
     assert params.version is not None  # checked by curvature_columns
     design = DESIGNS[params.version]
-    whole = operators(mesh, params.mollify)
     if not design.curvature_on_copy:
-        return _share_vectors(whole, design, SHARES)
+        return _share_vectors(operators(mesh, params.mollify), design, SHARES)
     # The wholes' curvature is measured on copies of `coarse` faces (`cfsig.cfhks`): a part
-    # that is a share f of its whole is simplified to f times as many.
-    rows = []
+    # that is a share f of its whole is simplified to f times as many. The part's own operators
+    # serve the shares it has too few faces to simplify for, built once if any.
+    rows, whole = [], None
     for share in SHARES:
         copy = simplified_mesh(mesh, round(design.coarse * share))
-        rows.append(_share_vectors(whole if copy is None else operators(copy), design, (share,)))
+        if copy is not None:
+            surface = operators(copy)
+        else:
+            if whole is None:
+                whole = operators(mesh, params.mollify)
+            surface = whole
+        rows.append(_share_vectors(surface, design, (share,)))
     return np.concatenate(rows)
 
 
