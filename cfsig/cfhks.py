@@ -53,7 +53,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .conformal import ConformalFactor, Operators, factorize_laplacian, operators
+from .conformal import ConformalFactor, Operators, laplacian_solver, operators
 from .curvature import CG_TOLERANCE, smoothed_curvature
 from .errors import SolverError
 from .mesh import Mesh
@@ -319,7 +319,7 @@ def spectrum_of(
         if found is not None:
             return found
     if solve is None:
-        solve = factorize_laplacian(ops.laplacian, ops.labels, solver)
+        solve = laplacian_solver(ops.laplacian, ops.labels, solver)
     return _eigenpairs(ops, solve, count), ops
 
 
@@ -328,7 +328,7 @@ def _copy_spectrum(coarse: Mesh, solver: str, count: int) -> tuple[Spectrum, Ope
     None when the copy cannot be solved (the simplification left it degenerate)."""
     copy = operators(coarse)
     try:
-        factor = factorize_laplacian(copy.laplacian, copy.labels, solver)
+        factor = laplacian_solver(copy.laplacian, copy.labels, solver)
         return _eigenpairs(copy, factor, count), copy
     except SolverError:
         return None

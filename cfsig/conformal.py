@@ -72,8 +72,8 @@ class ConformalFactor:
     curvature_error : float
         ``||K^T - K^R|| / |V| / pi``, paper section 3.4.
     solve : callable
-        The factorised L (`factorize_laplacian`), for further solves at the cost of one
-        forward and back substitution each.
+        The factorised L (`laplacian_solver`: solutions up to a constant per component,
+        unchecked), for further solves at the cost of one forward and back substitution each.
     """
 
     phi: np.ndarray
@@ -139,8 +139,8 @@ def conformal_factor(mesh: Mesh, mollify: float = 1e-5, solver: str = "auto") ->
         ``solver="cholmod"`` without a CHOLMOD binding installed.
     """
     ops = operators(mesh, mollify)
-    solve = factorize_laplacian(ops.laplacian, ops.labels, solver)
-    phi = solve(ops.target - ops.curvature)
+    solve = laplacian_solver(ops.laplacian, ops.labels, solver)
+    phi = _zero_mean(solve, ops.labels)(ops.target - ops.curvature)
     error = curvature_error(ops.lengths, mesh.faces, ops.boundary, phi, ops.target)
     return ConformalFactor(phi, ops, error, solve)
 
@@ -225,31 +225,82 @@ def factorize_laplacian(
     MissingDependencyError
         ``solver="cholmod"`` and no CHOLMOD binding installed.
     """
+    return _zero_mean(laplacian_solver(laplacian, labels, solver), labels)
+
+
+def _zero_mean(
+    solve_pinned: Callable[[np.ndarray], np.ndarray], labels: np.ndarray
+) -> Callable[[np.ndarray], np.ndarray]:
+    """`factorize_laplacian`'s checked solve with zero mean per component, from
+    `laplacian_solver`'s."""
+    counts = np.bincount(labels)
+
+    def solve(rhs: np.ndarray) -> np.ndarray:
+        if not np.all(np.isfinite(rhs)):
+            raise SolverError("the Laplacian or curvature is not finite (degenerate triangles?)")
+        try:
+            x = solve_pinned(rhs)
+        except (RuntimeError, ValueError, ArithmeticError) as exc:
+            raise SolverError(f"sparse solve failed: {exc}") from None
+        if not np.all(np.isfinite(x)):
+            raise SolverError("the sparse solve returned a non-finite solution")
+        return x - (np.bincount(labels, weights=x) / counts)[labels]
+
+    return solve
+
+
+def laplacian_solver(
+    laplacian: sp.spmatrix, labels: np.ndarray, solver: str = "auto"
+) -> Callable[[np.ndarray], np.ndarray]:
+    """Factorise a cotangent Laplacian once, for unchecked solves ``L x = rhs`` up to constants.
+
+    As `factorize_laplacian`, but each solution keeps 0 at the pinned vertices, and neither the
+    right-hand side nor the solution is checked: the Lanczos iteration of
+    `cfsig.spectrum.laplace_spectrum` makes about 150 solves, to which those checks and means
+    would add a third (docs/descriptors.md, "Where the time goes"), and it checks its
+    eigenvalues itself.
+
+    Parameters
+    ----------
+    laplacian : (n, n) sparse float64
+        Symmetric negative semidefinite Laplacian whose null space is the per-component constants.
+    labels : (n,) int
+        Connected component of each vertex.
+    solver : {"auto", "cholmod", "eigen", "scipy"}
+        Backend, see `factorize_laplacian`.
+
+    Returns
+    -------
+    solve : callable
+        ``solve(rhs)`` maps a (n,) float64 right-hand side that sums to zero on every
+        component to a (n,) float64 solution, 0 at the first vertex of each component.
+
+    Raises
+    ------
+    SolverError
+        Non-finite Laplacian or a failed factorisation.
+    ValueError
+        Unknown solver name.
+    MissingDependencyError
+        ``solver="cholmod"`` and no CHOLMOD binding installed.
+    """
     if solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; choose from {', '.join(SOLVERS)}")
     if not np.all(np.isfinite(laplacian.data)):
         raise SolverError("the Laplacian or curvature is not finite (degenerate triangles?)")
     system, keep = pinned_system(laplacian, labels)
-    counts = np.bincount(labels)
-    factor = None
-    if system.shape[0]:
-        try:
-            factor = factorize(system, solver)
-        except (RuntimeError, ValueError, ArithmeticError) as exc:
-            raise SolverError(f"sparse solve failed: {exc}") from None
+    if not system.shape[0]:
+        return np.zeros_like
+    try:
+        factor = factorize(system, solver)
+    except (RuntimeError, ValueError, ArithmeticError) as exc:
+        raise SolverError(f"sparse solve failed: {exc}") from None
+    rows = slice(1, None) if not keep[0] and keep[1:].all() else keep  # one component
 
     def solve(rhs: np.ndarray) -> np.ndarray:
-        if not np.all(np.isfinite(rhs)):
-            raise SolverError("the Laplacian or curvature is not finite (degenerate triangles?)")
         x = np.zeros(len(rhs))
-        if factor is not None:
-            try:
-                x[keep] = factor(-rhs[keep])
-            except (RuntimeError, ValueError, ArithmeticError) as exc:
-                raise SolverError(f"sparse solve failed: {exc}") from None
-        if not np.all(np.isfinite(x)):
-            raise SolverError("the sparse solve returned a non-finite solution")
-        return x - (np.bincount(labels, weights=x) / counts)[labels]
+        x[rows] = factor(-rhs[rows])
+        return x
 
     return solve
 

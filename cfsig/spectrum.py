@@ -75,8 +75,9 @@ def laplace_spectrum(
     labels : (n,) int
         Connected component of each vertex, numbered from 0.
     solve : callable
-        ``solve(b)`` returns an ``x`` with ``L x = b`` for any ``b`` that sums to zero on every
-        component (as `conformal.factorize_laplacian` returns); used for large meshes only.
+        ``solve(b)`` returns an ``x`` with ``L x = b``, up to a constant per component, for
+        any ``b`` that sums to zero on every component (`conformal.laplacian_solver`, or
+        `conformal.factorize_laplacian`); used for large meshes only.
     count : int
         Number of eigenpairs k wanted. A mesh with fewer nonzero eigenvalues gets all it has.
 
@@ -164,7 +165,7 @@ def _largest_inverse(
         values, found = spla.eigsh(
             operator, k=count, which="LA", v0=start, tol=tolerance, ncv=vectors
         )
-    except spla.ArpackError as exc:
+    except (RuntimeError, ValueError, ArithmeticError) as exc:  # ARPACK's, or a solve's
         raise SolverError(f"Laplace-Beltrami eigenvalues: {exc}") from None
     order = np.argsort(-values, kind="stable")
     return values[order], found[:, order]
