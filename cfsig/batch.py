@@ -12,12 +12,15 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from itertools import islice
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .errors import CfsigError, ClusterError, MissingDependencyError
-from .index import Entry, IndexWriter
 from .mesh import find_meshes, mesh_label
 from .params import Params
 from .signature import Signature, signature_file
+
+if TYPE_CHECKING:  # the workers import this module, and need no HDF5
+    from .index import IndexWriter
 
 _CONNECT_TIMEOUT = "20s"
 _COMMIT_SECONDS = 30.0
@@ -183,6 +186,8 @@ def index_meshes(
     IndexFileError
         A commit failed.
     """
+    from .index import Entry
+
     roots = list(paths)
     names: dict[Path, str] = {}  # the files found to compute (those in flight), and their names
     taken: set[str] | None = set() if len(roots) > 1 else None  # one folder has unique names

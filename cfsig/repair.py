@@ -24,7 +24,6 @@ from dataclasses import replace
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from .errors import MeshError
 from .geometry import Edges, edge_lengths, face_areas, mesh_edges
@@ -254,6 +253,8 @@ def _seeds(
     two parts get the median of their pairs' offsets as their shift, and the pairs are sorted
     by their distance once that shift is undone.
     """
+    from scipy.spatial import cKDTree  # here: a tenth of a second to import, for a rare repair
+
     points = vertices[candidates]
     k = min(8, len(candidates))
     length, near = cKDTree(points).query(points, k=k, distance_upper_bound=distance)
