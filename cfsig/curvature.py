@@ -16,11 +16,8 @@ within `CG_ITERATIONS` is factorised instead.
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from .conformal import Operators, factorize
 from .errors import SolverError
@@ -98,15 +95,34 @@ def _conjugate_gradients(
 ) -> tuple[np.ndarray | None, int]:
     """Solve ``system u = rhs`` by diagonally preconditioned conjugate gradients to a relative
     residual of ``tolerance``: the solution, or None when they do not converge within
-    `CG_ITERATIONS`, and the iterations made."""
+    `CG_ITERATIONS`, and the iterations made.
+
+    The iteration of `scipy.sparse.linalg.cg`, step for step (the same values), written out:
+    on a copy of a few thousand vertices its operator wrappers cost a fifth of the time.
+    """
+    norm = np.linalg.norm(rhs)
+    if norm == 0:
+        return np.zeros_like(rhs), 0
     inverse = 1.0 / system.diagonal()
-    preconditioner = spla.LinearOperator(system.shape, matvec=lambda r: inverse * r)
-    count = itertools.count(1)
-    u, info = spla.cg(
-        system, rhs, x0=guess, rtol=tolerance, atol=0.0, maxiter=CG_ITERATIONS,
-        M=preconditioner, callback=lambda _: next(count),
-    )  # fmt: skip
-    return (u if info == 0 else None), next(count) - 1
+    u = guess.copy()
+    residual = rhs - system @ u
+    direction, previous = np.empty_like(rhs), 1.0
+    for iteration in range(CG_ITERATIONS):
+        if np.linalg.norm(residual) < tolerance * norm:
+            return u, iteration
+        preconditioned = inverse * residual
+        current = np.dot(residual, preconditioned)
+        if iteration:
+            direction *= current / previous
+            direction += preconditioned
+        else:
+            direction[:] = preconditioned
+        image = system @ direction
+        step = current / np.dot(direction, image)
+        u += step * direction
+        residual -= step * image
+        previous = current
+    return None, CG_ITERATIONS
 
 
 def _factorised(system: sp.csr_matrix, rhs: np.ndarray) -> np.ndarray:
