@@ -93,7 +93,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from cfsig import cfhks
-from cfsig.conformal import conformal_factor, factorize, factorize_laplacian, operators
+from cfsig.conformal import conformal_factor, factorize, laplacian_solver, operators
 from cfsig.curvature import smoothed_curvature
 from cfsig.measures import RetrievalReport, evaluate_distances
 from cfsig.mesh import clean_mesh, read_mesh
@@ -1047,7 +1047,7 @@ def _stages_one(path: Path) -> dict[str, float]:
     surface = timed("the copy's operators", lambda: ops if copy is None else operators(copy))
     solve = timed(
         "the copy's factorisation",
-        lambda: factorize_laplacian(surface.laplacian, surface.labels, "auto"),
+        lambda: laplacian_solver(surface.laplacian, surface.labels, "auto"),
     )
     for pairs, label in ((60, "version 7"), (v8.eigenpairs, "version 8")):
         spectrum = timed(

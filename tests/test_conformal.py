@@ -6,6 +6,7 @@ from cfsig.conformal import (
     available_solvers,
     conformal_factor,
     factorize_laplacian,
+    laplacian_solver,
     pinned_system,
 )
 from cfsig.errors import SolverError
@@ -117,3 +118,21 @@ def test_pinned_system_drops_the_first_vertex_of_each_component(parts):
     expected = -lap.toarray()[np.ix_(keep, keep)]
     assert system.format == "csc" and system.has_sorted_indices
     assert np.array_equal(system.toarray(), expected)
+
+
+@pytest.mark.parametrize("parts", [1, 2])
+def test_laplacian_solver_solves_up_to_a_constant_per_component(parts):
+    v, f = icosphere(2)
+    v, f = (
+        np.vstack([v + 3 * k for k in range(parts)]),
+        np.vstack([f + k * 162 for k in range(parts)]),
+    )
+    lap = geometry.cotan_laplacian(geometry.edge_lengths(v, f), f, len(v))
+    labels = np.repeat(np.arange(parts), 162)
+    rhs = np.random.default_rng(1).standard_normal(len(v))
+    rhs -= (np.bincount(labels, weights=rhs) / 162)[labels]
+    x = laplacian_solver(lap, labels)(rhs)
+    assert np.allclose(lap @ x, rhs, atol=1e-9)
+    assert np.all(x[162 * np.arange(parts)] == 0)  # the pinned vertices
+    centred = factorize_laplacian(lap, labels)(rhs)
+    assert np.allclose(x - (np.bincount(labels, weights=x) / 162)[labels], centred, atol=1e-12)

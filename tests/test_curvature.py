@@ -101,3 +101,39 @@ def test_predicted_hard_scales_are_factorised_at_once(monkeypatch):
     smoothed_curvature(ops, scales, 1e-12)
     assert len(calls) > 1
     np.testing.assert_allclose(predicted, exact, rtol=0, atol=1e-9 * np.abs(exact).max())
+
+
+@pytest.mark.parametrize("tolerance", [1e-3, 1e-10])
+def test_conjugate_gradients_are_scipys_iteration(tolerance):
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    v, f = icosphere(3)
+    ops = operators(clean_mesh(v * [1.0, 0.6, 0.4], f))
+    system = sp.diags(ops.vertex_area) + 0.01 * sp.csr_matrix(-ops.laplacian)
+    rhs, guess = ops.curvature, ops.curvature / ops.vertex_area
+    steps: list[None] = []
+    inverse = 1.0 / system.diagonal()
+    expected, info = spla.cg(
+        system, rhs, x0=guess, rtol=tolerance, atol=0.0, maxiter=curvature.CG_ITERATIONS,
+        M=spla.LinearOperator(system.shape, matvec=lambda r: inverse * r),
+        callback=lambda _: steps.append(None),
+    )  # fmt: skip
+    solved, iterations = curvature._conjugate_gradients(system, rhs, guess, tolerance)
+    assert info == 0 and iterations == len(steps) > 1
+    assert np.array_equal(solved, expected)
+    zero, _ = curvature._conjugate_gradients(system, np.zeros_like(rhs), guess, tolerance)
+    assert not zero.any()  # scipy returns the zero right-hand side at once
+
+
+def test_conjugate_gradients_give_up_past_the_cap(monkeypatch):
+    import scipy.sparse as sp
+
+    v, f = icosphere(3)
+    ops = operators(clean_mesh(v, f))
+    monkeypatch.setattr(curvature, "CG_ITERATIONS", 2)
+    system = sp.csr_matrix(-ops.laplacian) + 1e-6 * sp.identity(len(v), format="csr")
+    solved, iterations = curvature._conjugate_gradients(
+        system, ops.curvature - ops.curvature.mean(), np.zeros(len(v)), 1e-12
+    )
+    assert solved is None and iterations == 2
