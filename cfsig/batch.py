@@ -15,18 +15,18 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .errors import CfsigError, ClusterError, MissingDependencyError
-from .mesh import find_meshes, mesh_label
+from .files import find_meshes, mesh_label
 from .params import Params
-from .signature import Signature, signature_file
 
-if TYPE_CHECKING:  # the workers import this module, and need no HDF5
+if TYPE_CHECKING:  # neither HDF5 in the workers, nor SciPy in the process that writes the index
     from .index import IndexWriter
+    from .signature import Signature
 
 _CONNECT_TIMEOUT = "20s"
 _COMMIT_SECONDS = 30.0
 _TASK_SECONDS = 0.5  # work per Dask task that batches aim at: docs/index-scale.md
 _MAX_BATCH = 1000  # files per Dask task at most
-Compute = Callable[[Path, Params, str], Signature]
+Compute = Callable[[Path, Params, str], "Signature"]
 
 
 @dataclass(frozen=True)
@@ -59,7 +59,7 @@ def compute_many(
     solver: str = "auto",
     jobs: int | None = None,
     scheduler: str | None = None,
-    compute: Compute = signature_file,
+    compute: Compute | None = None,
 ) -> Iterator[Outcome]:
     """Signatures of many files in worker processes, yielded as they finish.
 
@@ -86,9 +86,9 @@ def compute_many(
     scheduler : str, optional
         Address of a running Dask scheduler (``tcp://host:port``): compute on its workers
         instead of local processes. Needs the ``dask`` extra, and cfsig installed on the workers.
-    compute : callable
+    compute : callable, optional
         ``compute(path, params, solver) -> Signature``, a module-level function (it is pickled
-        by name); `signature_file` unless a caller wraps it.
+        by name); `cfsig.signature.signature_file` unless a caller wraps it.
 
     Yields
     ------
@@ -102,6 +102,7 @@ def compute_many(
     ClusterError
         The scheduler cannot be reached.
     """
+    compute = compute or _signature_file()
     if scheduler is not None:
         yield from _compute_on_cluster(paths, params, solver, scheduler, compute)
         return
@@ -143,7 +144,7 @@ def index_meshes(
 ) -> tuple[int, list[str]]:
     """Compute the new and changed meshes under some files and folders and add them to an index.
 
-    Files are found by `cfsig.mesh.find_meshes` as the computation goes: the first is computed
+    Files are found by `cfsig.files.find_meshes` as the computation goes: the first is computed
     as soon as it is found, not after the whole folder has been scanned. A file whose name is
     indexed with the same contents (SHA-256) is skipped, and only those files are hashed; the
     others are computed by `compute_many` and added as `Entry` (name, the name of the folder
@@ -319,6 +320,15 @@ def _compute_on_cluster(
                     yield Outcome(path, result.signature, result.error)
             future.release()
             tasks.update(submit(1 + (len(batch) > 1 and not results)))
+
+
+def _signature_file() -> Compute:
+    """`cfsig.signature.signature_file`, imported when first needed: the process that hands out
+    the files and writes the index computes nothing, and so starts without loading SciPy
+    (docs/performance.md, "Start-up")."""
+    from .signature import signature_file
+
+    return signature_file
 
 
 def _work_batch(

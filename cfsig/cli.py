@@ -794,7 +794,7 @@ def _compute_pictures(drawn: list, params: Params, png, ply, hist) -> None:
 def _query_picture(png: Path, meshes, results, classes: set[str]) -> None:
     """The grid of each query (one row per query, wrapped) and its results."""
     from . import figures
-    from .mesh import mesh_label
+    from .files import mesh_label
 
     rows = []
     for path, hits in zip(meshes, results, strict=True):

@@ -19,9 +19,9 @@ import numpy as np
 from .batch import Progress, compute_many, successes
 from .cla import labels_from_cla
 from .errors import MeshError
+from .files import find_meshes, mesh_label
 from .index import IndexReader
 from .measures import RetrievalReport, evaluate_distances, evaluate_queries
-from .mesh import find_meshes, mesh_label
 from .nearest import l1_distances
 from .params import Params, signature_length
 from .parts import curvature_columns, expanded_distances, partial_file
@@ -133,7 +133,7 @@ def compute_collection(
 ) -> tuple[Collection, list[str]]:
     """Compute the signatures of all mesh files in a folder, each subfolder a class.
 
-    Files are found by `cfsig.mesh.find_meshes` and computed in spawned worker processes by
+    Files are found by `cfsig.files.find_meshes` and computed in spawned worker processes by
     `cfsig.batch.compute_many` (in a script, call it under ``if __name__ == "__main__":``); a
     file that fails is left out and reported.
 

@@ -30,6 +30,8 @@ def test_import_cfsig_and_the_cli_load_neither_scipy_nor_matplotlib():
     for code in ("import cfsig", "import cfsig.cli"):  # `cfsig --help` starts without NumPy
         assert not _loaded_after(code) & {"numpy", "h5py", "scipy", "matplotlib"}, code
     assert not _loaded_after("import cfsig.index") & {"scipy", "matplotlib"}
+    # the process that hands files to the workers and writes the index
+    assert not _loaded_after("import cfsig.batch, cfsig.files") & {"scipy", "h5py", "matplotlib"}
     assert "scipy" in _loaded_after("import cfsig\ncfsig.signature_file")  # loaded when used
 
 

@@ -3,7 +3,8 @@ import pytest
 import trimesh
 
 from cfsig.errors import MeshError
-from cfsig.mesh import clean_mesh, find_meshes, read_mesh
+from cfsig.files import find_meshes
+from cfsig.mesh import clean_mesh, read_mesh
 from tests.helpers import icosphere, write_off
 
 

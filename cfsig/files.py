@@ -1,0 +1,61 @@
+"""Mesh files: finding them under folders, naming them, and labelling them by their folder.
+
+Kept free of NumPy and SciPy: the process that walks the folders and writes the index computes
+no signature (its workers do, `cfsig.batch`), and so starts without loading them.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
+
+
+def find_meshes(paths: Iterable[str | os.PathLike]) -> Iterator[tuple[Path, str]]:
+    """Mesh files under some files and folders, in a stable order, with their names.
+
+    Folders are walked recursively (sorted, hidden entries skipped) for OFF, OBJ, PLY and STL
+    files; a file given directly is taken whatever its extension, so that reading it reports
+    what is wrong with it.
+
+    Parameters
+    ----------
+    paths : iterable of str or path-like
+        Files and folders.
+
+    Yields
+    ------
+    path : Path
+        A mesh file.
+    name : str
+        Its path relative to the folder given (POSIX separators), or its file name when it was
+        given directly.
+    """
+    for root in map(Path, paths):
+        if not root.is_dir():
+            yield root, root.name
+            continue
+        for folder, dirs, files in os.walk(root):
+            dirs[:] = sorted(d for d in dirs if not d.startswith("."))
+            for file in sorted(files):
+                if Path(file).suffix.lower() in MESH_SUFFIXES and not file.startswith("."):
+                    path = Path(folder) / file
+                    yield path, path.relative_to(root).as_posix()
+
+
+def mesh_label(path: str | os.PathLike) -> str:
+    """The class label of a mesh file: the name of the folder that holds it.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A mesh file, e.g. ``shrec07/ant/81.off``.
+
+    Returns
+    -------
+    label : str
+        E.g. ``ant``; empty for a relative path without a folder.
+    """
+    return Path(path).parent.name
