@@ -1,4 +1,5 @@
-"""Start-up time: ``cfsig --help`` and one small ``cfsig compute`` against ``import numpy``.
+"""Start-up time: ``cfsig --help``, one small ``cfsig compute`` and ``cfsig index`` against
+``import numpy``.
 
 Each command runs ``--repeat`` times in a fresh interpreter, the commands taking turns so that
 a change in the machine's load falls on all of them alike, after one unmeasured warm-up run of
@@ -46,10 +47,17 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory() as folder:
         mesh = write_off(Path(folder) / "ball.off", *icosphere(2))
+        index = Path(folder) / "index"
         commands = {
             'python -c "import numpy"': [sys.executable, "-c", "import numpy"],
             "cfsig --help": [cfsig, "--help"],
             "cfsig compute ball.off (162 vertices)": [cfsig, "compute", str(mesh)],
+            # a new index each time: the main process, one worker process, one mesh
+            "cfsig index ball.off --jobs 1 (a new index)": [
+                "sh",
+                "-c",
+                f'rm -rf "{index}" && "{cfsig}" index "{mesh}" -o "{index}" --jobs 1',
+            ],
         }
         seconds = walls(commands, args.repeat)
     base = seconds['python -c "import numpy"']
