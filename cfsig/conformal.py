@@ -125,7 +125,7 @@ def conformal_factor(mesh: Mesh, mollify: float = 1e-5, solver: str = "auto") ->
     mollify : float
         Intrinsic mollification margin, see `operators`.
     solver : {"auto", "cholmod", "eigen", "scipy"}
-        Sparse solver backend, see `factorize_laplacian`.
+        Sparse solver backend, see `laplacian_solver`.
 
     Returns
     -------
@@ -192,23 +192,13 @@ def factorize_laplacian(
 ) -> Callable[[np.ndarray], np.ndarray]:
     """Factorise a cotangent Laplacian once, for solves ``L x = rhs`` with zero mean per component.
 
-    L has one null vector per component (the constants), so one vertex per component is pinned
-    to 0, the remaining symmetric positive definite system ``-L' x' = -rhs'`` is factorised, and
-    each solution's mean is subtracted per component afterwards (the paper's zero-mean
-    condition). ``rhs`` must sum to zero on every component; the pinned equation is then implied
-    by the others.
+    The solutions of `laplacian_solver`, checked, with their mean subtracted per component
+    afterwards (the paper's zero-mean condition).
 
     Parameters
     ----------
-    laplacian : (n, n) sparse float64
-        Symmetric negative semidefinite Laplacian whose null space is the per-component constants.
-    labels : (n,) int
-        Connected component of each vertex.
-    solver : {"auto", "cholmod", "eigen", "scipy"}
-        ``"cholmod"``: CHOLMOD's sparse Cholesky (needs the ``cholmod`` extra); ``"eigen"``:
-        Eigen's simplicial Cholesky with an AMD ordering, through libigl; ``"scipy"``: SciPy's
-        SuperLU with a symmetric minimum-degree ordering; ``"auto"``: the fastest installed
-        (see `available_solvers`).
+    laplacian, labels, solver
+        As `laplacian_solver`.
 
     Returns
     -------
@@ -218,12 +208,8 @@ def factorize_laplacian(
 
     Raises
     ------
-    SolverError
-        Non-finite Laplacian or a failed factorisation.
-    ValueError
-        Unknown solver name.
-    MissingDependencyError
-        ``solver="cholmod"`` and no CHOLMOD binding installed.
+    SolverError, ValueError, MissingDependencyError
+        As `laplacian_solver`.
     """
     return _zero_mean(laplacian_solver(laplacian, labels, solver), labels)
 
@@ -254,11 +240,12 @@ def laplacian_solver(
 ) -> Callable[[np.ndarray], np.ndarray]:
     """Factorise a cotangent Laplacian once, for unchecked solves ``L x = rhs`` up to constants.
 
-    As `factorize_laplacian`, but each solution keeps 0 at the pinned vertices, and neither the
-    right-hand side nor the solution is checked: the Lanczos iteration of
-    `cfsig.spectrum.laplace_spectrum` makes about 150 solves, to which those checks and means
-    would add a third (docs/descriptors.md, "Where the time goes"), and it checks its
-    eigenvalues itself.
+    L has one null vector per component (the constants), so one vertex per component is pinned
+    to 0 and the remaining symmetric positive definite system ``-L' x' = -rhs'`` is factorised;
+    ``rhs`` must sum to zero on every component, so that the pinned equation is implied by the
+    others. Neither the right-hand side nor the solution is checked, and no mean is subtracted:
+    the Lanczos iteration of `cfsig.spectrum.laplace_spectrum`, about 150 solves, projects the
+    constants out itself and checks its eigenvalues once (`factorize_laplacian` checks).
 
     Parameters
     ----------
@@ -267,7 +254,10 @@ def laplacian_solver(
     labels : (n,) int
         Connected component of each vertex.
     solver : {"auto", "cholmod", "eigen", "scipy"}
-        Backend, see `factorize_laplacian`.
+        ``"cholmod"``: CHOLMOD's sparse Cholesky (needs the ``cholmod`` extra); ``"eigen"``:
+        Eigen's simplicial Cholesky with an AMD ordering, through libigl; ``"scipy"``: SciPy's
+        SuperLU with a symmetric minimum-degree ordering; ``"auto"``: the fastest installed
+        (see `available_solvers`).
 
     Returns
     -------
@@ -289,7 +279,7 @@ def laplacian_solver(
     if not np.all(np.isfinite(laplacian.data)):
         raise SolverError("the Laplacian or curvature is not finite (degenerate triangles?)")
     system, keep = pinned_system(laplacian, labels)
-    if not system.shape[0]:
+    if not system.shape[0]:  # every component a single vertex: every vertex pinned
         return np.zeros_like
     try:
         factor = factorize(system, solver)
@@ -349,7 +339,7 @@ def factorize(matrix: sp.csc_matrix, solver: str) -> Callable[[np.ndarray], np.n
     matrix : (k, k) scipy.sparse.csc_matrix
         Symmetric positive definite, e.g. from `pinned_system`.
     solver : {"auto", "cholmod", "eigen", "scipy"}
-        Backend, see `factorize_laplacian`.
+        Backend, see `laplacian_solver`.
 
     Returns
     -------

@@ -97,8 +97,8 @@ def _conjugate_gradients(
     residual of ``tolerance``: the solution, or None when they do not converge within
     `CG_ITERATIONS`, and the iterations made.
 
-    The iteration of `scipy.sparse.linalg.cg`, step for step (the same values), written out:
-    on a copy of a few thousand vertices its operator wrappers cost a fifth of the time.
+    The iteration of `scipy.sparse.linalg.cg`, step for step (the same values), written out
+    without its operator wrappers, which weigh on systems of a few thousand vertices.
     """
     norm = np.linalg.norm(rhs)
     if norm == 0:

@@ -1,7 +1,7 @@
 """Mesh files: finding them under folders, naming them, and labelling them by their folder.
 
-Kept free of NumPy and SciPy: the process that walks the folders and writes the index computes
-no signature (its workers do, `cfsig.batch`), and so starts without loading them.
+Free of NumPy and SciPy, so that the process that walks the folders and writes the index, which
+computes no signature (its workers do, `cfsig.batch`), need not load SciPy.
 """
 
 from __future__ import annotations
