@@ -98,3 +98,21 @@ def test_deterministic(count):
     _, b = _spectrum(v, f, count)
     assert np.array_equal(a.eigenvalues, b.eigenvalues)
     assert np.array_equal(a.eigenvectors, b.eigenvectors)
+
+
+def test_a_solve_gone_non_finite_ends_in_a_solver_error():
+    # the Lanczos iteration's solves are unchecked (conformal.laplacian_solver): a factorisation
+    # whose solutions turn non-finite must still end the iteration with an error, not values
+    from cfsig.errors import SolverError
+
+    cf, _ = _spectrum(*icosphere(3), 3)
+    ops, calls = cf.operators, []
+
+    def failing(rhs):
+        calls.append(None)
+        x = cf.solve(rhs)
+        x[3] = np.nan if len(calls) > 5 else x[3]
+        return x
+
+    with pytest.raises(SolverError):
+        laplace_spectrum(ops.laplacian, ops.vertex_area, ops.labels, failing, 45)
