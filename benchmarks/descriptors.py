@@ -31,10 +31,10 @@ queries and of noisy copies of them against the clean meshes, and prints the bes
 each number of eigenpairs, the channel that sets the cost; its own cache of candidate channels,
 for every mesh and its scan-like copies, goes under ``--cache`` too.
 
-``study8`` chooses version 8: ``study7``'s candidates on copies of 1000, 2000, 3000 and 4000 faces (a
-cache of each), the best of each copy and number of eigenpairs timed on every ``--every``-th
-SHREC 2007 mesh, and the cheapest within 0.01 of the best that meets the issue's quality bars
-on the training collections (ShapeDNA's first tier from ``measure``'s cache).
+``study8`` chooses version 8: ``study7``'s candidates on copies of 1000, 2000, 3000 and 4000
+faces (a cache of each), the best of each copy and number of eigenpairs timed on every
+``--every``-th SHREC 2007 mesh, and the cheapest within 0.01 of the best that meets the issue's
+quality bars on the training collections (ShapeDNA's first tier from ``measure``'s cache).
 
 ``study`` chooses the channel weights and heat times over a small grid, each candidate's
 channel divisors being the medians of its channel distances averaged over the training
