@@ -785,7 +785,8 @@ def study8(args: argparse.Namespace) -> None:
     best of each copy and number of eigenpairs by version 7's objective, timed on every
     ``--every``-th SHREC 2007 mesh; the cheapest within `V8_MARGIN` of the best that meets the
     quality bars on the training collections is chosen (ShapeDNA's FT from ``measure``'s
-    cache)."""
+    cache). The weightings of smaller copies or fewer eigenpairs that would also meet them are
+    listed (`_cheaper_table`)."""
     measured = _load(args.cache)
     shapedna = {c: _ft("ShapeDNA", measured[c]) for c in V3_CHOSEN_ON}
     rows, every = [], {}
