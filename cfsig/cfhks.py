@@ -169,7 +169,7 @@ DESIGNS[7] = replace(
 )
 # Version 8: version 7 with 45 eigenpairs, the cheapest candidate within 0.01 of version 7's
 # objective that meets issue 14's quality bars on SHREC 2007 and FAUST, chosen among copies of
-# 1000, 2000 and 4000 faces and 30, 45 and 60 eigenpairs by `python benchmarks/descriptors.py
+# 1000, 2000, 3000 and 4000 faces and 30, 45 and 60 eigenpairs by `python benchmarks/descriptors.py
 # study8` (docs/descriptors.md, "Version 8"; docs/method.md, section 16): the same scales and
 # weights, its own spectrum's and heat's medians.
 DESIGNS[8] = replace(

@@ -104,15 +104,38 @@ def operators(mesh: Mesh, mollify: float = 1e-5) -> Operators:
     laplacian = geometry.cotan_laplacian(lengths, faces, n, areas, mesh.edges)
     boundary = geometry.boundary_vertices(faces, laplacian)
     curvature = geometry.angle_defect(geometry.corner_angles(lengths), faces, boundary)
-    if mesh.parts is None:
-        count, labels = geometry.components(laplacian)
-    else:  # the same graph as the Laplacian's pattern, so the same numbering
-        count, labels = int(mesh.parts.max()) + 1, mesh.parts
+    count, labels = mesh_components(mesh, laplacian)
     vertex_area = geometry.vertex_areas(areas, faces, n)
     target = geometry.target_curvature(curvature, vertex_area, labels)
     return Operators(
         lengths, delta, boundary, curvature, areas, count, labels, vertex_area, target, laplacian
     )
+
+
+def mesh_components(mesh: Mesh, graph: sp.spmatrix | None = None) -> tuple[int, np.ndarray]:
+    """The connected components of a mesh, as the solve numbers them.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        A checked mesh; its ``parts``, when the repair stage kept them, are the components.
+    graph : (n, n) sparse, optional
+        A matrix with the mesh's vertex adjacency as its pattern, e.g. its Laplacian, when one
+        is at hand: the same graph as ``parts``, so the same numbering; else the edge graph is
+        built.
+
+    Returns
+    -------
+    count : int
+        Number of components.
+    labels : (n,) int
+        Component of each vertex, numbered from 0.
+    """
+    if mesh.parts is not None:
+        return int(mesh.parts.max()) + 1, mesh.parts
+    if graph is None:
+        graph = geometry.edge_graph(mesh.faces, len(mesh.vertices))
+    return geometry.components(graph)
 
 
 def conformal_factor(mesh: Mesh, mollify: float = 1e-5, solver: str = "auto") -> ConformalFactor:

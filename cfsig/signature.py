@@ -16,9 +16,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .cfhks import cfhks_vector, copy_vector, solves_phi
-from .conformal import ConformalFactor, Operators, conformal_factor, operators
+from .conformal import ConformalFactor, Operators, conformal_factor, mesh_components, operators
 from .errors import MeshError, SolverError
-from .geometry import components, edge_graph
 from .mesh import Mesh, parse_mesh, read_bytes
 from .params import Params
 from .repair import repair_mesh
@@ -257,19 +256,12 @@ def _repair_and_sign(mesh: Mesh, params: Params, solver: str, phi: bool) -> tupl
         None if cf is None else cf.phi,
         len(mesh.vertices),
         len(mesh.faces),
-        _component_count(mesh) if ops is None else ops.n_components,
+        mesh_components(mesh)[0] if ops is None else ops.n_components,
         float("nan") if cf is None else cf.curvature_error,
         repairs,
         mesh.route,
         time.perf_counter() - start,
     )
-
-
-def _component_count(mesh: Mesh) -> int:
-    """The number of connected components of a mesh, as `conformal.operators` counts them."""
-    if mesh.parts is not None:
-        return int(mesh.parts.max()) + 1
-    return components(edge_graph(mesh.faces, len(mesh.vertices)))[0]
 
 
 def signature_file(path: str | os.PathLike, params: Params, solver: str = "auto") -> Signature:
