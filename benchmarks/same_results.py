@@ -4,8 +4,8 @@
 error, and per mesh the checked vertices and faces, the Laplacian (its CSC arrays), the
 curvature and the vector of each ``cfhks`` version of ``--cfhks``, to an ``.npz`` file; run it
 once per version of cfsig (each with its own ``PYTHONPATH``).
-``compare`` prints, per quantity, whether the two dumps are identical, and phi's largest
-difference relative to its range.
+``compare`` prints, per quantity, whether the two dumps are identical, and for one that is not
+its largest difference relative to its range over a mesh (phi's always).
 
     python benchmarks/same_results.py dump OUT.npz [--every K] [--solvers cholmod scipy]
         [--cfhks 1 2 3 4]
@@ -58,22 +58,22 @@ def dump(args: argparse.Namespace) -> None:
 
 
 def compare(args: argparse.Namespace) -> None:
-    """Print, per quantity, whether two dumps agree bit for bit, and phi's largest change."""
+    """Print, per quantity, whether two dumps agree bit for bit, and how far they differ."""
     a, b = np.load(args.a), np.load(args.b)
     if set(a.files) != set(b.files):
         raise SystemExit("the dumps hold different meshes or solvers")
     identical: dict[str, bool] = {}
-    phi_change: dict[str, float] = {}
+    change: dict[str, float] = {}
     for name in sorted(a.files):
         quantity = name.split("/", 1)[1]
         x, y = a[name], b[name]
         same = x.shape == y.shape and np.array_equal(x, y)
         identical[quantity] = identical.get(quantity, True) and same
-        if quantity.endswith("phi") and x.shape == y.shape:
-            change = float(np.abs(x - y).max() / np.ptp(x))
-            phi_change[quantity] = max(phi_change.get(quantity, 0.0), change)
+        if x.shape == y.shape and x.size and (quantity.endswith("phi") or not same):
+            relative = float(np.abs(x - y).max() / max(np.ptp(x), np.finfo(float).tiny))
+            change[quantity] = max(change.get(quantity, 0.0), relative)
     for quantity, same in identical.items():
-        extra = f", max |dphi| / range {phi_change[quantity]:.3g}" if quantity in phi_change else ""
+        extra = f", max |difference| / range {change[quantity]:.3g}" if quantity in change else ""
         print(f"{quantity}: {'identical' if same else 'DIFFERENT'}{extra}")
 
 

@@ -12,19 +12,19 @@ component) has the eigenvalues ``1 / lambda``, largest first.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from .errors import SolverError
 
 _TOLERANCE = 1e-8
 _CHECK_TOLERANCE = 1e-3  # the quick search for a missed copy of a repeated eigenvalue
-_CHECK_VECTORS = 8  # Lanczos vectors of that search
+_BREAKDOWN = 1e-10  # a step this small against the largest diagonal entry: an invariant space
 _DENSE_BELOW = 64  # vertices, and 3 per eigenpair: smaller problems are solved densely
 
 
@@ -116,7 +116,8 @@ def _project(basis: np.ndarray, u: np.ndarray) -> np.ndarray:
 def _lanczos_eigenpairs(
     root: np.ndarray, null: np.ndarray, solve: Callable[[np.ndarray], np.ndarray], count: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Smallest nonzero eigenpairs in ``u`` coordinates by ARPACK on the inverse operator.
+    """Smallest nonzero eigenpairs in ``u`` coordinates by Lanczos iteration on the inverse
+    operator.
 
     Lanczos from one start vector can miss copies of a repeated eigenvalue (a symmetric mesh,
     equal components). So a quick, loose search for the largest eigenvalue with the
@@ -128,14 +129,12 @@ def _lanczos_eigenpairs(
     inverted, vectors = _largest_inverse(root, null, solve, count, _TOLERANCE, seed=0)
     for seed in itertools.count(1):
         known = np.hstack([null, vectors])
-        if len(root) - known.shape[1] < _CHECK_VECTORS + 1:
+        if len(root) == known.shape[1]:
             break
-        probe, _ = _largest_inverse(
-            root, known, solve, 1, _CHECK_TOLERANCE, seed, vectors=_CHECK_VECTORS
-        )
+        probe, _ = _largest_inverse(root, known, solve, 1, _CHECK_TOLERANCE, seed)
         if probe[0] <= inverted[-1] * (1 + _CHECK_TOLERANCE):
             break
-        extra = min(count, len(root) - known.shape[1] - 1)
+        extra = min(count, len(root) - known.shape[1])
         more, more_vectors = _largest_inverse(root, known, solve, extra, _TOLERANCE, seed)
         order = np.argsort(-np.concatenate([inverted, more]), kind="stable")[:count]
         inverted = np.concatenate([inverted, more])[order]
@@ -151,26 +150,117 @@ def _largest_inverse(
     count: int,
     tolerance: float,
     seed: int,
-    vectors: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Largest eigenpairs of the inverse operator off the span of ``deflated``, descending."""
-    n = len(root)
+    rng = np.random.default_rng(seed)
 
     def inverse(u: np.ndarray) -> np.ndarray:
         # -L z = M^(1/2) Q u, then Q M^(1/2) z: symmetric, independent of z's constant
         z = solve(-root * _project(deflated, u))
         return _project(deflated, root * z)
 
-    operator = spla.LinearOperator((n, n), matvec=inverse, dtype=np.float64)
-    start = _project(deflated, np.random.default_rng(seed).random(n))
-    try:
-        values, found = spla.eigsh(
-            operator, k=count, which="LA", v0=start, tol=tolerance, ncv=vectors
-        )
-    except (RuntimeError, ValueError, ArithmeticError) as exc:  # ARPACK's, or a solve's
-        raise SolverError(f"Laplace-Beltrami eigenvalues: {exc}") from None
-    order = np.argsort(-values, kind="stable")
-    return values[order], found[:, order]
+    def fresh() -> np.ndarray:
+        return _project(deflated, rng.random(len(root)))
+
+    return lanczos(inverse, fresh, len(root) - deflated.shape[1], count, tolerance)
+
+
+def lanczos(
+    apply: Callable[[np.ndarray], np.ndarray],
+    fresh: Callable[[], np.ndarray],
+    dimension: int,
+    count: int,
+    tolerance: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The largest eigenpairs of a symmetric operator by Lanczos iteration with full
+    reorthogonalisation.
+
+    The Krylov basis grows one vector per application of the operator and is kept orthonormal
+    against all its vectors, without restarts: for a few dozen eigenpairs of a mesh's inverse
+    Laplacian this costs about as many applications as ARPACK's implicitly restarted
+    iteration, without ARPACK's own work between them (docs/method.md, section 17). The Ritz
+    pairs of the tridiagonal projection are checked when their residuals, falling
+    geometrically, are predicted to have converged.
+
+    One Krylov space holds one copy of each repeated eigenvalue. A space that becomes invariant
+    is continued from a new start vector orthogonal to it, which finds the copies it could not
+    hold; a copy missed by a space that converged first is the caller's to look for
+    (`laplace_spectrum` does).
+
+    Parameters
+    ----------
+    apply : callable
+        ``apply(u)`` returns the operator times ``u``, a (n,) float64 vector of the operator's
+        space; the operator is symmetric on that space.
+    fresh : callable
+        ``fresh()`` returns a new pseudo-random (n,) float64 vector of that space: the start,
+        and a restart when the Krylov space becomes invariant.
+    dimension : int
+        Dimension of the space, at least ``count``.
+    count : int
+        Number of eigenpairs, at least 1.
+    tolerance : float
+        Relative residual at which a Ritz pair has converged:
+        ``|apply(x) - theta x| <= tolerance * |theta|``, as ARPACK's ``tol``.
+
+    Returns
+    -------
+    values : (count,) float64
+        Largest eigenvalues, descending.
+    vectors : (n, count) float64
+        Orthonormal eigenvectors.
+
+    Raises
+    ------
+    SolverError
+        The operator gave a non-finite vector.
+    """
+    start = fresh()
+    basis = np.empty((min(dimension, 3 * count + 20), len(start)))  # rows: contiguous vectors
+    alpha, beta = np.empty(dimension), np.zeros(dimension)
+    basis[0] = start / math.sqrt(np.dot(start, start))
+    check, last, largest = min(dimension, count + max(10, count // 2)), None, 0.0
+    j = 0
+    while True:  # the step that reaches the dimension returns
+        v = basis[j]
+        w = apply(v)
+        alpha[j] = a = np.dot(v, w)
+        largest = max(largest, abs(a))
+        w -= a * v
+        if j:
+            w -= beta[j - 1] * basis[j - 1]
+        w -= np.dot(np.dot(basis[: j + 1], w), basis[: j + 1])
+        beta[j] = b = math.sqrt(np.dot(w, w))
+        if not math.isfinite(b):
+            raise SolverError("the Lanczos iteration's solve returned a non-finite vector")
+        steps = j + 1
+        invariant = b <= _BREAKDOWN * largest
+        if steps == check or invariant or steps == dimension:
+            theta, s = scipy.linalg.eigh_tridiagonal(alpha[:steps], beta[: steps - 1])
+            theta, s = theta[::-1][:count], s[:, ::-1][:, :count]
+            ratio = (b * np.abs(s[-1]) / (tolerance * np.abs(theta))).max()
+            if steps == dimension or (len(theta) == count and ratio <= 1 and not invariant):
+                return theta, np.dot(basis[:steps].T, s)
+            check = min(dimension, steps + _next_check(last, steps, ratio))
+            last = steps, ratio
+        if steps == len(basis):
+            basis = np.vstack([basis, np.empty((min(dimension, 2 * steps) - steps, len(v)))])
+        if invariant:  # start a new Krylov space orthogonal to this one
+            w = fresh()
+            for _ in range(2):
+                w -= np.dot(np.dot(basis[:steps], w), basis[:steps])
+            beta[j], b = 0.0, math.sqrt(np.dot(w, w))
+        np.multiply(w, 1.0 / b, out=basis[steps])
+        j = steps
+
+
+def _next_check(last: tuple[int, float] | None, steps: int, ratio: float) -> int:
+    """Steps until the residual ratio is predicted to reach 1, from its geometric fall since
+    the last check; 10 after the first check."""
+    if last is None or ratio >= last[1]:
+        return 10
+    rate = np.log(last[1] / ratio) / (steps - last[0])
+    return int(np.clip(np.ceil(np.log(ratio) / rate), 2, 30))
 
 
 def _dense_eigenpairs(

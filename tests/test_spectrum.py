@@ -4,7 +4,7 @@ import scipy.linalg
 
 from cfsig.conformal import conformal_factor
 from cfsig.mesh import clean_mesh
-from cfsig.spectrum import heat_kernel_signature, laplace_spectrum
+from cfsig.spectrum import heat_kernel_signature, lanczos, laplace_spectrum
 from tests.helpers import icosphere, random_rotation, torus
 
 
@@ -116,3 +116,39 @@ def test_a_solve_gone_non_finite_ends_in_a_solver_error():
 
     with pytest.raises(SolverError):
         laplace_spectrum(ops.laplacian, ops.vertex_area, ops.labels, failing, 45)
+
+
+def _operator(values, seed=0):
+    """A symmetric matrix with the given eigenvalues and random eigenvectors, and its fresh
+    pseudo-random vectors."""
+    rng = np.random.default_rng(seed)
+    basis = np.linalg.qr(rng.standard_normal((len(values), len(values))))[0]
+    matrix = (basis * values) @ basis.T
+    return (lambda u: matrix @ u), (lambda: rng.random(len(values)))
+
+
+def test_lanczos_matches_a_dense_solve():
+    values = 1.0 / np.arange(1.0, 301.0)  # as the inverse Laplacian's: slowly separating
+    apply, fresh = _operator(values)
+    found, vectors = lanczos(apply, fresh, len(values), 20, 1e-8)
+    assert np.allclose(found, values[:20], rtol=1e-12)
+    assert np.allclose(vectors.T @ vectors, np.eye(20), atol=1e-10)
+    residual = np.column_stack([apply(x) for x in vectors.T]) - vectors * found
+    assert np.linalg.norm(residual, axis=0).max() <= 1e-8 * found.max()
+
+
+def test_lanczos_restarts_when_the_krylov_space_is_invariant():
+    # three distinct eigenvalues: one start vector's Krylov space is invariant after three
+    # steps; the copies it cannot see are found from new start vectors orthogonal to it
+    values = np.repeat([4.0, 2.0, 1.0], [3, 3, 4])
+    apply, fresh = _operator(values, seed=1)
+    found, vectors = lanczos(apply, fresh, len(values), 6, 1e-10)
+    assert np.allclose(found, values[:6], rtol=1e-10)
+    assert np.allclose(vectors.T @ vectors, np.eye(6), atol=1e-10)
+
+
+def test_lanczos_returns_every_eigenpair_of_a_small_space():
+    values = np.array([3.0, 2.0, 1.5, 1.0, 0.5])
+    apply, fresh = _operator(values, seed=2)
+    found, _ = lanczos(apply, fresh, len(values), 5, 1e-12)
+    assert np.allclose(found, values, rtol=1e-10)
