@@ -88,7 +88,8 @@ def laplace_spectrum(
     Raises
     ------
     SolverError
-        The Lanczos iteration did not converge or gave non-positive eigenvalues.
+        A solve of the Lanczos iteration gave non-finite values, or the eigenvalues are not
+        finite and positive.
     """
     n = len(vertex_area)
     n_components = int(labels.max()) + 1
