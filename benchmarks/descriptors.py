@@ -14,6 +14,7 @@ Stages (each prints Markdown for docs/descriptors.md; run from the repository ro
     python benchmarks/descriptors.py noise      # which curvature scales survive vertex noise
     python benchmarks/descriptors.py coarse     # version 4: the spectrum of a simplified copy
     python benchmarks/descriptors.py stages     # CPU seconds of each stage of versions 3 to 8
+    python benchmarks/descriptors.py lanczos    # the Lanczos iteration's steps against its cap
 
 ``measure`` computes, for every mesh of the three collections (``--data-root``, where
 ``../shared/data/unpack`` puts them), nine descriptors from the file, each timed in CPU seconds
@@ -58,6 +59,11 @@ histograms move from the 1e-10 solve's, on average over a collection's meshes, b
 `TOLERANCE_SHARE` of the median distance between two meshes' histograms, on SHREC 2007 and
 FAUST (version 3's training collections).
 
+``lanczos`` counts the operator applications (solves) of every Lanczos iteration that version
+8 runs on every mesh of the three collections, and of PSB's training half when it is unpacked
+under ``--data-root``: per eigenpair for the first search, and in all for the search for missed
+copies of a repeated eigenvalue (one eigenpair), against the iteration's cap.
+
 ``coarse`` chooses version 4's copy: version 3 with the spectrum and heat computed on a copy of
 each mesh simplified by fast-simplification to each of ``--faces`` faces (meshes with fewer are
 used as they are), FT and CPU seconds per mesh against version 3 on the full mesh; the copy
@@ -87,14 +93,16 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
+from unittest import mock
 
 import messy
 import numpy as np
 import scipy.sparse as sp
 
-from cfsig import cfhks
+from cfsig import cfhks, spectrum
 from cfsig.conformal import conformal_factor, factorize, laplacian_solver, operators
 from cfsig.curvature import smoothed_curvature
+from cfsig.errors import MeshError
 from cfsig.measures import RetrievalReport, evaluate_distances
 from cfsig.mesh import clean_mesh, read_mesh
 from cfsig.params import VERSIONS, Params
@@ -1133,6 +1141,56 @@ def stages(args: argparse.Namespace) -> None:
         )
 
 
+def _lanczos_one(path: Path) -> list[tuple[int, int]]:
+    """(eigenpairs asked, operator applications) of every Lanczos iteration of version 8 on one
+    mesh file; a file that fails keeps the iterations it ran."""
+    real, calls = spectrum.lanczos, []
+
+    def counted(apply, fresh, dimension, count, tolerance):
+        applied = [0]
+
+        def counting(u: np.ndarray) -> np.ndarray:
+            applied[0] += 1
+            return apply(u)
+
+        try:
+            return real(counting, fresh, dimension, count, tolerance)
+        finally:
+            calls.append((count, applied[0]))
+
+    with mock.patch.object(spectrum, "lanczos", counted), contextlib.suppress(MeshError):
+        signature_file(path, DESCRIPTORS["cfhks 8"])
+    return calls
+
+
+def lanczos(args: argparse.Namespace) -> None:
+    """Steps of version 8's Lanczos iterations on every mesh, against the iteration's cap."""
+    print(
+        "| collection | meshes | first search: steps per eigenpair, largest (99th percentile, "
+        "median) | search for missed copies: steps, largest (99th percentile, median) |"
+    )
+    print("|---|---|---|---|")
+    for name in (*COLLECTIONS, "psb-train"):
+        paths = sorted((args.data_root / name).glob("*/*.off"))
+        if not paths:
+            continue
+        with ProcessPoolExecutor(args.jobs) as pool:
+            rows = list(pool.map(_lanczos_one, paths, chunksize=4))
+        first = np.array([n / c for row in rows for c, n in row if c > 1])
+        probe = np.array([n for row in rows for c, n in row if c == 1])
+        print(
+            f"| {name} | {len(paths)} | {first.max():.1f} ({np.percentile(first, 99):.1f}, "
+            f"{np.median(first):.1f}) | {probe.max()} ({np.percentile(probe, 99):.0f}, "
+            f"{np.median(probe):.0f}) |",
+            flush=True,
+        )
+    print(
+        f"\nThe cap: {spectrum._STEPS_PER_PAIR} steps per eigenpair and "
+        f"{spectrum._STEPS_MORE} more ({spectrum._STEPS_PER_PAIR * 45 + spectrum._STEPS_MORE} "
+        f"for 45 eigenpairs, {spectrum._STEPS_PER_PAIR + spectrum._STEPS_MORE} for one)."
+    )
+
+
 def _ft(name: str, arrays: dict[str, np.ndarray]) -> float:
     """A cached descriptor's first tier on its collection."""
     return _report(_distances(name, arrays[name]), arrays["labels"]).measures["FT"]
@@ -1154,12 +1212,13 @@ def main() -> None:
         "cost": cost,
         "coarse": coarse,
         "stages": stages,
+        "lanczos": lanczos,
     }
     parser.add_argument("stage", choices=(*runs, "shapedna"))
     parser.add_argument("files", nargs="*", type=Path, help="the shapedna stage's meshes")
     parser.add_argument("--data-root", type=Path, default=DATA_ROOT, help="unpacked collections")
     parser.add_argument("--cache", type=Path, default=CACHE, help="folder of the caches")
-    parser.add_argument("--jobs", type=int, default=2, help="worker processes of measure")
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes of measure, lanczos")
     parser.add_argument(
         "--every", type=int, default=10, help="cost, stages, study8: every k-th SHREC07 mesh"
     )

@@ -25,6 +25,9 @@ from .errors import SolverError
 _TOLERANCE = 1e-8
 _CHECK_TOLERANCE = 1e-3  # the quick search for a missed copy of a repeated eigenvalue
 _BREAKDOWN = 1e-10  # a step this small against the largest diagonal entry: an invariant space
+# The Lanczos iteration's cap, steps per eigenpair and more: about three times the most seen
+# on the shared collections (docs/method.md, section 17)
+_STEPS_PER_PAIR, _STEPS_MORE = 10, 200
 _DENSE_BELOW = 64  # vertices, and 3 per eigenpair: smaller problems are solved densely
 
 
@@ -214,15 +217,17 @@ def lanczos(
     Raises
     ------
     SolverError
-        The operator gave a non-finite vector.
+        The operator gave a non-finite vector, or the Ritz pairs did not converge within
+        ``_STEPS_PER_PAIR * count + _STEPS_MORE`` steps (which bounds the basis's memory).
     """
+    cap = min(dimension, _STEPS_PER_PAIR * count + _STEPS_MORE)
     start = fresh()
-    basis = np.empty((min(dimension, 3 * count + 20), len(start)))  # rows: contiguous vectors
-    alpha, beta = np.empty(dimension), np.zeros(dimension)
+    basis = np.empty((min(cap, 3 * count + 20), len(start)))  # rows: contiguous vectors
+    alpha, beta = np.empty(cap), np.zeros(cap)
     basis[0] = start / math.sqrt(np.dot(start, start))
-    check, last, largest = min(dimension, count + max(10, count // 2)), None, 0.0
+    check, last, largest = min(cap, count + max(10, count // 2)), None, 0.0
     j = 0
-    while True:  # the step that reaches the dimension returns
+    while True:  # the check at the cap returns or raises
         v = basis[j]
         w = apply(v)
         alpha[j] = a = np.dot(v, w)
@@ -236,16 +241,18 @@ def lanczos(
             raise SolverError("the Lanczos iteration's solve returned a non-finite vector")
         steps = j + 1
         invariant = b <= _BREAKDOWN * largest
-        if steps == check or invariant or steps == dimension:
+        if steps == check or invariant:
             theta, s = scipy.linalg.eigh_tridiagonal(alpha[:steps], beta[: steps - 1])
             theta, s = theta[::-1][:count], s[:, ::-1][:, :count]
             ratio = (b * np.abs(s[-1]) / (tolerance * np.abs(theta))).max()
             if steps == dimension or (len(theta) == count and ratio <= 1 and not invariant):
                 return theta, np.dot(basis[:steps].T, s)
-            check = min(dimension, steps + _next_check(last, steps, ratio))
+            if steps == cap:
+                raise SolverError(f"the Lanczos iteration did not converge in {cap} steps")
+            check = min(cap, steps + _next_check(last, steps, ratio))
             last = steps, ratio
         if steps == len(basis):
-            basis = np.vstack([basis, np.empty((min(dimension, 2 * steps) - steps, len(v)))])
+            basis = np.vstack([basis, np.empty((min(cap, 2 * steps) - steps, len(v)))])
         if invariant:  # start a new Krylov space orthogonal to this one
             w = fresh()
             for _ in range(2):

@@ -152,3 +152,21 @@ def test_lanczos_returns_every_eigenpair_of_a_small_space():
     apply, fresh = _operator(values, seed=2)
     found, _ = lanczos(apply, fresh, len(values), 5, 1e-12)
     assert np.allclose(found, values, rtol=1e-10)
+
+
+def test_lanczos_gives_up_at_its_cap():
+    # an operator that is no fixed symmetric matrix (a solve gone wrong) never converges: the
+    # iteration must end in an error after a bounded number of steps, not grow its basis to
+    # the size of the space
+    from cfsig.errors import SolverError
+
+    rng = np.random.default_rng(3)
+    calls = []
+
+    def apply(u):
+        calls.append(None)
+        return rng.standard_normal(len(u))
+
+    with pytest.raises(SolverError, match="did not converge"):
+        lanczos(apply, lambda: rng.random(5000), 5000, 10, 1e-8)
+    assert len(calls) < 1000
