@@ -1,4 +1,4 @@
-"""The descriptors on SHREC 2007, McGill and FAUST in one run: cf, cfhks 1 to 7, ShapeDNA.
+"""The descriptors on SHREC 2007, McGill and FAUST in one run: cf, cfhks 1 to 8, ShapeDNA.
 
 Stages (each prints Markdown for docs/descriptors.md; run from the repository root):
 
