@@ -1184,10 +1184,10 @@ def lanczos(args: argparse.Namespace) -> None:
             f"{np.median(probe):.0f}) |",
             flush=True,
         )
+    per, more, pairs = spectrum._STEPS_PER_PAIR, spectrum._STEPS_MORE, cfhks.DESIGNS[8].eigenpairs
     print(
-        f"\nThe cap: {spectrum._STEPS_PER_PAIR} steps per eigenpair and "
-        f"{spectrum._STEPS_MORE} more ({spectrum._STEPS_PER_PAIR * 45 + spectrum._STEPS_MORE} "
-        f"for 45 eigenpairs, {spectrum._STEPS_PER_PAIR + spectrum._STEPS_MORE} for one)."
+        f"\nThe cap: {per} steps per eigenpair and {more} more ({per * pairs + more} for version "
+        f"8's {pairs} eigenpairs, {per + more} for one)."
     )
 
 
