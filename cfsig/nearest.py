@@ -70,8 +70,15 @@ def l1_distances(queries: np.ndarray, signatures: np.ndarray) -> np.ndarray:
     return out.astype(np.float64)
 
 
+Score = Callable[[np.ndarray], np.ndarray]
+
+
 def nearest(
-    reader: IndexReader, queries: np.ndarray, k: int, columns: slice | None = None
+    reader: IndexReader,
+    queries: np.ndarray,
+    k: int,
+    columns: slice | None = None,
+    score: Score | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The k nearest indexed signatures of each query, exactly, pruning by sketches.
 
@@ -83,7 +90,8 @@ def nearest(
     reading them costs more than a scan, and for segments without sketches, the rows are
     scanned in full: all queries share one pass over them, by one thread per core. Memory
     stays bounded by a few blocks of rows and `_BOUND_CELLS` bounds, whatever the index size.
-    Superseded rows are skipped. A search of some ``columns`` only scans in full.
+    Superseded rows are skipped. A search of some ``columns``, or by a ``score``, only scans in
+    full.
 
     Parameters
     ----------
@@ -96,26 +104,32 @@ def nearest(
         Number of results per query; at most N are returned.
     columns : slice, optional
         Compare only these columns of the stored signatures (one channel of a descriptor).
+    score : callable, optional
+        Rank by ``score(distances)`` instead: it maps the L1 distances (q, m) float32 of all
+        queries to some m rows to one score per row (m,), smallest best
+        (`cfsig.parts.partial_scores`).
 
     Returns
     -------
     rows : (q, min(k, N)) int64
-        Row numbers of the results, nearest first, ties broken by row number.
+        Row numbers of the results, nearest first, ties broken by row number; with ``score``,
+        one line (1, min(k, N)).
     distances : (q, min(k, N)) float64
-        Their L1 distances, accumulated in float32.
+        Their L1 distances, accumulated in float32, or their scores.
     """
     queries = _float32(np.atleast_2d(queries))
     n = len(reader)
-    best = _Best(len(queries), max(min(k, n), 0), reader.physical_rows)
+    best = _Best(1 if score else len(queries), max(min(k, n), 0), reader.physical_rows)
     if best.k == 0 or len(queries) == 0:
         return best.result(reader)
     kernel = choose_kernel(len(queries) * n)
-    sketched = [v for v in reader.segments if v.sketch is not None and columns is None]
+    pruned = columns is None and score is None
+    sketched = [v for v in reader.segments if v.sketch is not None and pruned]
     if sum(v.signatures.shape[0] for v in sketched) < PRUNE_MIN_ROWS:
         sketched = []
     full = [v for v in reader.segments if all(v is not s for s in sketched)]
     if full:
-        _scan(full, queries, kernel, best, 0, columns)
+        _scan(full, queries, kernel, best, 0, columns, score)
     if sketched:
         _Pruned(reader, sketched, kernel, best).search(queries)
     return best.result(reader)
@@ -128,15 +142,17 @@ def _scan(
     best: _Best,
     first: int,
     columns: slice | None = None,
+    score: Score | None = None,
 ) -> None:
     """Exact distances of every live row of some segments, merged into ``best``.
 
     ``queries`` are those of ``best`` from number ``first`` on; with ``columns``, they and the
-    distances are of those columns of the rows only.
+    distances are of those columns of the rows only; with ``score``, the scores of all the
+    queries' distances are merged, as ``best``'s one query.
     """
     blocks = [(view, b) for view in views for b in plan_blocks(view.signatures, _BLOCK_ROWS)]
     block_rows = max((b.stop - b.start for _, b in blocks), default=1)
-    group = max(1, _OUT_CELLS // block_rows)
+    group = len(queries) if score else max(1, _OUT_CELLS // block_rows)
 
     def work(task: tuple[SegmentView, Block], buffer: np.ndarray, lock: threading.Lock) -> None:
         view, block = task
@@ -152,6 +168,8 @@ def _scan(
             count = len(queries[q0 : q0 + group])
             dist = np.empty((count, len(rows)), np.float32)
             kernel(queries[q0 : q0 + group], rows, dist)
+            if score:
+                dist = score(dist)[None, :]
             with lock:
                 best.merge(first + q0, view.start + block.start, dist, live)
 

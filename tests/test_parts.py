@@ -9,10 +9,21 @@ from click.testing import CliRunner
 from cfsig import cfhks
 from cfsig.cli import main
 from cfsig.errors import PartialError
+from cfsig.index import IndexReader
 from cfsig.measures import evaluate_queries
 from cfsig.mesh import clean_mesh
 from cfsig.params import Params, signature_length
-from cfsig.parts import SHARES, curvature_columns, partial_vectors
+from cfsig.parts import (
+    HISTOGRAM_WEIGHT,
+    SHARES,
+    curvature_columns,
+    partial_distances,
+    partial_file,
+    partial_scores,
+    partial_search,
+    partial_vectors,
+    share_queries,
+)
 from cfsig.signature import compute_signature
 from tests.helpers import icosphere, open_cylinder, torus, write_off
 
@@ -105,6 +116,44 @@ def test_query_partial_finds_the_whole(wholes):
         hits = json.loads(result.output)
         assert hits[0]["label"] == name and hits[0]["distance"] == 0.0
         assert [h["rank"] for h in hits] == list(range(1, len(hits) + 1))
+
+
+def test_partial_scores_are_the_unexplained_share_plus_the_distance():
+    rng = np.random.default_rng(0)
+
+    def histograms(n):  # two scales of four bins, each summing to 1: mass 2
+        h = rng.random((n, 2, 4))
+        return (h / h.sum(axis=2, keepdims=True)).reshape(n, 8)
+
+    wholes, part = histograms(5), histograms(len(SHARES))
+    l1 = np.abs(share_queries(part)[:, None, :] - wholes[None]).sum(axis=2)
+    direct = [
+        np.maximum(f * p - wholes, 0).sum(axis=1) / (2 * f)
+        + HISTOGRAM_WEIGHT * np.abs(p - wholes).sum(axis=1) / 2
+        for f, p in zip(SHARES, part, strict=True)
+    ]
+    assert np.allclose(partial_scores(l1, 2.0), np.min(direct, axis=0))
+
+
+def test_a_whole_that_holds_the_part_explains_it():
+    # Half the whole's mass in each bin; the part all in the first: the whole holds it at the
+    # share 1/2, only half of it at the share 1.
+    whole, part = np.array([[0.5, 0.5]]), np.tile([1.0, 0.0], (len(SHARES), 1))
+    l1 = np.abs(share_queries(part)[:, None, :] - whole[None]).sum(axis=2)
+    assert partial_scores(l1, 1.0)[0] == pytest.approx(HISTOGRAM_WEIGHT * 1.0)
+    assert partial_scores(np.zeros((2 * len(SHARES), 1)), 1.0)[0] == 0.0
+
+
+def test_partial_search_scores_as_partial_distances(wholes):
+    root, index = wholes
+    with IndexReader(index) as reader:
+        signatures = reader.signatures[:]
+        for name in ("torus", "bumpy"):
+            vectors = partial_file(root / "parts" / name / "cut.off", reader.params)
+            hits, distance = partial_search(reader, vectors, 3)
+            in_memory = partial_distances(vectors, signatures, reader.params)
+            assert hits[0].entry.label == name
+            assert distance == pytest.approx(in_memory.min(), rel=1e-5)
 
 
 def test_evaluate_partial(wholes):
