@@ -21,11 +21,13 @@ Each part is a query against the collection's whole shapes, the part's own whole
 relevant the wholes of its class (`cfsig.measures.evaluate_queries`), ranked three ways: as a
 whole shape (its default ``cfhks`` signature, what ``cfsig query`` does), by the partial distance of
 the curvature channel alone (`cfsig.parts.partial_distances`), and as ``cfsig query --partial``
-ranks (`cfsig.parts.expanded_distances`). It also lists SHREC 2007's genus outliers, the meshes
-whose Euler characteristic is not their class's most common one, with their first tier (FT)
-against the other queries of their classes, for every ``cfhks`` version from 2 to the default, for
-each channel of the default alone, and for ShapeDNA (`descriptors.shapedna`, lapy: the
-``bench`` extra): whether any of them ranks the outliers as well as their classes' others.
+ranks (`cfsig.parts.expanded_distances`); and by the partial distance for each weight of
+`WEIGHTS`, which is how its weight was chosen (on SHREC 2007). It also lists SHREC 2007's
+genus outliers, the meshes whose Euler characteristic is not their class's most common one,
+with their first tier (FT) against the other queries of their classes, for every ``cfhks``
+version from 2 to the default, for each channel of the default alone, and for ShapeDNA
+(`descriptors.shapedna`, lapy: the ``bench`` extra): whether any of them ranks the outliers as
+well as their classes' others.
 """
 
 from __future__ import annotations
@@ -56,16 +58,26 @@ from cfsig.measures import evaluate_distances, evaluate_queries
 from cfsig.mesh import Mesh, clean_mesh, read_mesh
 from cfsig.nearest import l1_distances
 from cfsig.params import VERSIONS, Params
-from cfsig.parts import expanded_distances, partial_distances, partial_vectors
+from cfsig.parts import (
+    HISTOGRAM_WEIGHT,
+    SHARES,
+    expanded_distances,
+    partial_distances,
+    partial_scores,
+    partial_vectors,
+    share_queries,
+)
 from cfsig.signature import compute_signature
 
 ROOT = Path(__file__).resolve().parents[1]
 COLLECTIONS = ("shrec07", "mcgill", "faust")
 KINDS = ("cut", "holes", "scan")
 DEFAULT = Params(descriptor="cfhks")  # the latest version
+DESIGN = cfhks.DESIGNS[DEFAULT.version or 0]
 # The earlier versions of the genus table (SHREC 2007 only).
 EARLIER = tuple(v for v in VERSIONS["cfhks"] if 2 <= v < (DEFAULT.version or 0))
 MEASURES = ("NN", "FT", "mAP")
+WEIGHTS = (0.5, 0.7, 1.0, 1.5, 2.0, 4.0)  # of the L1 distance in the partial distance
 MARKER = "<!-- measured: what follows is written by benchmarks/partial.py -->"
 
 
@@ -225,6 +237,31 @@ def _partial_table(results: dict[str, dict]) -> list[str]:
     return lines
 
 
+def _weight_table(results: dict[str, dict]) -> list[str]:
+    """NN of the partial distance for each weight of its L1 term, and for the L1 distance alone
+    (the partial distance before the unexplained share): how `HISTOGRAM_WEIGHT` was chosen."""
+    heads = [f"{name} {kind}" for name in results for kind in KINDS]
+    lines = [f"| partial distance | {' | '.join(heads)} |", "|---|" + "---|" * len(heads)]
+    scores: dict[str, list[float]] = collections.defaultdict(list)
+    for data in results.values():
+        stored = data["default"][:, cfhks.channel_columns(DESIGN)["curvature"]]
+        for kind in KINDS:
+            l1 = [l1_distances(share_queries(v), stored) for v in data[f"{kind} partial"]]
+            rankings = {"L1 distance alone": [d[len(SHARES) :].min(axis=0) for d in l1]}
+            for weight in WEIGHTS:
+                rankings[f"weight {weight:g}"] = [
+                    partial_scores(d, float(v[0].sum()), weight)
+                    for d, v in zip(l1, data[f"{kind} partial"], strict=True)
+                ]
+            for title, rows in rankings.items():
+                report = evaluate_queries(np.array(rows), data["labels"], data["labels"])
+                scores[title].append(report.measures["NN"])
+    for title, row in scores.items():
+        chosen = " (chosen)" if title == f"weight {HISTOGRAM_WEIGHT:g}" else ""
+        lines.append(f"| {title}{chosen} | " + " | ".join(f"{x:.3f}" for x in row) + " |")
+    return lines
+
+
 def _own_whole_table(results: dict[str, dict]) -> list[str]:
     """Where each part's own whole ranks by the partial distance, per collection and kind:
     what a second stage that checked the first candidates against the part could reach."""
@@ -258,7 +295,7 @@ def _genus_table(data: dict) -> list[str]:
         for version in EARLIER
     }
     distances[f"cfhks {DEFAULT.version}"] = l1_distances(default, default)
-    for channel, columns in cfhks.channel_columns(cfhks.DESIGNS[DEFAULT.version]).items():
+    for channel, columns in cfhks.channel_columns(DESIGN).items():
         part = default[:, columns]
         distances[f"cfhks {DEFAULT.version}, {channel} alone"] = l1_distances(part, part)
     dna = data["ShapeDNA"]
@@ -346,6 +383,10 @@ def main() -> None:
             "### Parts against the whole collections",
             "",
             *_partial_table(results),
+            "",
+            "### The partial distance's weight (NN)",
+            "",
+            *_weight_table(results),
             "",
             "### Where each part's own whole ranks by the partial distance",
             "",

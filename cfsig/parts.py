@@ -238,14 +238,16 @@ def share_queries(vectors: np.ndarray) -> np.ndarray:
     return np.concatenate([np.asarray(SHARES)[:, None] * vectors, vectors])
 
 
-def partial_scores(distances: np.ndarray, mass: float) -> np.ndarray:
+def partial_scores(
+    distances: np.ndarray, mass: float, weight: float = HISTOGRAM_WEIGHT
+) -> np.ndarray:
     """The partial distance of each whole: unexplained share plus L1 distance, at the best share.
 
     For a part ``p`` measured as the share ``f`` of a whole ``w`` (histograms of equal mass
     ``m``), the part's histograms scaled by ``f`` lie under its whole's, bin for bin, as its
     surface lies within the whole's. The unexplained share ``sum(max(f p - w, 0)) / (f m)``, in
     [0, 1], measures how far they do not; alone it would favour the smallest shares, which
-    explain least, so `HISTOGRAM_WEIGHT` times the L1 distance ``sum|p - w| / m``, in [0, 2],
+    explain least, so ``weight`` times the L1 distance ``sum|p - w| / m``, in [0, 2],
     is added. Since ``sum|f p - w| = 2 sum(max(f p - w, 0)) + (1 - f) m``, both terms come
     from L1 distances, which the blockwise search computes.
 
@@ -255,6 +257,8 @@ def partial_scores(distances: np.ndarray, mass: float) -> np.ndarray:
         L1 distances of the part's `share_queries` to the curvature columns of N wholes.
     mass : float
         The sum of one of the part's `partial_vectors`, which equals a whole's.
+    weight : float
+        The L1 distance's weight (`HISTOGRAM_WEIGHT`).
 
     Returns
     -------
@@ -264,7 +268,7 @@ def partial_scores(distances: np.ndarray, mass: float) -> np.ndarray:
     shares = np.asarray(SHARES, distances.dtype)[:, None]
     scaled, plain = distances[: len(SHARES)], distances[len(SHARES) :]
     unexplained = np.maximum(scaled - (1 - shares) * mass, 0) / (2 * shares * mass)
-    return (unexplained + HISTOGRAM_WEIGHT * plain / mass).min(axis=0)
+    return (unexplained + weight * plain / mass).min(axis=0)
 
 
 def expanded_distances(vectors: np.ndarray, signatures: np.ndarray, params: Params) -> np.ndarray:
