@@ -77,7 +77,7 @@ DESIGN = cfhks.DESIGNS[DEFAULT.version or 0]
 # The earlier versions of the genus table (SHREC 2007 only).
 EARLIER = tuple(v for v in VERSIONS["cfhks"] if 2 <= v < (DEFAULT.version or 0))
 MEASURES = ("NN", "FT", "mAP")
-WEIGHTS = (0.5, 0.7, 1.0, 1.5, 2.0, 4.0)  # of the L1 distance in the partial distance
+WEIGHTS = (0.0, 0.5, 0.7, 1.0, 1.5, 2.0, 4.0)  # of the L1 distance in the partial distance
 MARKER = "<!-- measured: what follows is written by benchmarks/partial.py -->"
 
 
