@@ -34,7 +34,8 @@ from .simplify import simplified_mesh
 
 SHARES = tuple(2.0 ** (-j / 2) for j in range(7))  # a part's area over its whole's: 1 to 1/8
 # The L1 distance's weight beside the unexplained share in `partial_scores`: chosen on SHREC 2007
-# alone, the best mean NN of its three kinds of parts (docs/partial.md, "The partial distance").
+# alone, the best mean NN of its three kinds of parts (docs/partial.md, "The partial distance's
+# weight").
 HISTOGRAM_WEIGHT = 1.0
 
 
