@@ -4,7 +4,9 @@ Where HDF5 stores rows as plain bytes (contiguous, or chunked by whole rows with
 file without a user block, read by the default driver), a block is read from the file with one
 ``preadv`` into a reused buffer, at the offset HDF5 reports: one copy from the page cache, no
 HDF5 in between. With a thread per core this scanned faster than memory-mapping each block,
-though one thread alone reads mapped blocks faster (`docs/query-options.md`). Any
+though one thread alone reads mapped blocks faster (`docs/query-options.md`); some columns
+of a block (`read_columns`) are copied from a memory map, which reads only those (docs/partial.md,
+"Scale"). Any
 other layout (compressed, compact, external, non-native byte order, chunks not yet allocated) is
 read through h5py into the same buffer. Reading at fixed offsets is safe because the files of an
 index are never modified: a commit adds a segment file and renames a new manifest into place,
@@ -13,6 +15,7 @@ and a merge deletes the files it replaced, which stay readable through the open 
 
 from __future__ import annotations
 
+import mmap
 import os
 from dataclasses import dataclass
 
@@ -102,6 +105,52 @@ def read_block(dataset: h5py.Dataset, block: Block, buffer: np.ndarray) -> np.nd
     if os.preadv(handle, [out.data.cast("B")], block.offset) != out.nbytes:
         raise IndexFileError(f"{dataset.file.filename}: the file ends inside the signatures")
     return out
+
+
+def read_columns(
+    dataset: h5py.Dataset, block: Block, columns: slice, buffer: np.ndarray
+) -> np.ndarray:
+    """Some columns of the rows of one block.
+
+    Plain rows are copied from a memory map of the block, which touches only those columns'
+    bytes instead of copying whole rows out of the page cache; other layouts are read whole
+    (`read_block`) and sliced.
+
+    Parameters
+    ----------
+    dataset : h5py.Dataset
+        The dataset the block was planned on, still open.
+    block : Block
+        From `plan_blocks`.
+    columns : slice
+        The columns wanted.
+    buffer : (rows, bins) float32, C-contiguous
+        Space for at least ``block.stop - block.start`` whole rows, used for other layouts.
+
+    Returns
+    -------
+    values : (block.stop - block.start, len(columns)) float32, C-contiguous
+
+    Raises
+    ------
+    IndexFileError
+        The file ends before the block does.
+    """
+    if block.offset is None:
+        return np.ascontiguousarray(read_block(dataset, block, buffer)[:, columns])
+    shape = (block.stop - block.start, dataset.shape[1])
+    handle = dataset.file.id.get_vfd_handle()
+    # A map reaching past the end of the file would kill the process when touched there.
+    if os.fstat(handle).st_size < block.offset + shape[0] * shape[1] * _FLOAT32.itemsize:
+        raise IndexFileError(f"{dataset.file.filename}: the file ends inside the signatures")
+    start = block.offset - block.offset % mmap.ALLOCATIONGRANULARITY
+    skip = block.offset - start
+    length = skip + shape[0] * shape[1] * _FLOAT32.itemsize
+    with mmap.mmap(handle, length, prot=mmap.PROT_READ, offset=start) as mapped:
+        rows = np.frombuffer(mapped, _FLOAT32, shape[0] * shape[1], skip).reshape(shape)
+        values = np.ascontiguousarray(rows[:, columns])
+        del rows  # the map closes only once no array views it
+    return values
 
 
 def read_rows(

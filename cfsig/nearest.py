@@ -16,7 +16,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from .blocks import Block, plan_blocks, read_block, read_rows
+from .blocks import Block, plan_blocks, read_block, read_columns, read_rows
 from .index import Entry, IndexReader, SegmentView
 from .l1 import Kernel, choose_kernel
 from .sketch import adjust_bounds, query_sketches, threshold
@@ -156,9 +156,10 @@ def _scan(
 
     def work(task: tuple[SegmentView, Block], buffer: np.ndarray, lock: threading.Lock) -> None:
         view, block = task
-        rows = read_block(view.signatures, block, buffer)
-        if columns is not None:
-            rows = np.ascontiguousarray(rows[:, columns])
+        if columns is None:
+            rows = read_block(view.signatures, block, buffer)
+        else:
+            rows = read_columns(view.signatures, block, columns, buffer)
         dead = view.dead[(view.dead >= block.start) & (view.dead < block.stop)] - block.start
         live = None
         if len(dead):

@@ -7,7 +7,7 @@ import pytest
 import cfsig.l1
 import cfsig.nearest
 import cfsig.segments
-from cfsig.blocks import plan_blocks, read_block
+from cfsig.blocks import plan_blocks, read_block, read_columns
 from cfsig.errors import IndexFileError
 from cfsig.index import Entry, IndexReader, IndexWriter
 from cfsig.l1 import choose_kernel, fast_kernel, l1_numpy
@@ -149,12 +149,16 @@ def test_every_layout_gives_the_same_result(tmp_path, monkeypatch, layout):
         blocks = plan_blocks(data, 10)
         buffer = np.empty((max(b.stop - b.start for b in blocks), 200), np.float32)
         parts = [read_block(data, b, buffer).copy() for b in blocks]
+        columns = [read_columns(data, b, slice(30, 90), buffer) for b in blocks]
         rows, _ = nearest(r, hists[:2], 6)
+        some, _ = nearest(r, hists[:2, 30:90], 6, slice(30, 90))
     direct = [b.offset is not None for b in blocks]  # read from the file, not through HDF5
     assert all(direct) if layout in ("chunked", "contiguous") else not any(direct)
     assert all(b.stop - b.start <= 16 for b in blocks)
     assert np.array_equal(np.concatenate(parts), hists)
+    assert np.array_equal(np.concatenate(columns), hists[:, 30:90])
     assert np.array_equal(rows, _brute_nearest(hists[:2], hists, 6)[0])
+    assert np.array_equal(some, _brute_nearest(hists[:2, 30:90], hists[:, 30:90], 6)[0])
 
 
 def test_small_compressed_chunks_are_read_many_at_a_time(tmp_path):
@@ -192,6 +196,8 @@ def test_a_file_cut_short_after_opening_is_a_clear_error(tmp_path, monkeypatch):
         os.truncate(_segment(path), blocks[-1].offset + 10)
         with pytest.raises(IndexFileError, match="ends inside the signatures"):
             nearest(r, _histograms(1, 4), 5)
+        with pytest.raises(IndexFileError, match="ends inside the signatures"):
+            nearest(r, _histograms(1, 4)[:, :50], 5, slice(0, 50))
 
 
 def test_empty_index_and_k_zero(tmp_path):
