@@ -5,12 +5,12 @@ file without a user block, read by the default driver), a block is read from the
 ``preadv`` into a reused buffer, at the offset HDF5 reports: one copy from the page cache, no
 HDF5 in between. With a thread per core this scanned faster than memory-mapping each block,
 though one thread alone reads mapped blocks faster (`docs/query-options.md`); some columns
-of a block (`read_columns`) are copied from a memory map, which reads only those (docs/partial.md,
-"Scale"). Any
-other layout (compressed, compact, external, non-native byte order, chunks not yet allocated) is
-read through h5py into the same buffer. Reading at fixed offsets is safe because the files of an
-index are never modified: a commit adds a segment file and renames a new manifest into place,
-and a merge deletes the files it replaced, which stay readable through the open file.
+of a block (`read_columns`) are copied from a memory map, which reads only those
+(docs/partial.md, "Scale"). Any other layout (compressed, compact, external, non-native byte
+order, chunks not yet allocated) is read through h5py into the same buffer. Reading at fixed
+offsets is safe because the files of an index are never modified: a commit adds a segment file
+and renames a new manifest into place, and a merge deletes the files it replaced, which stay
+readable through the open file.
 """
 
 from __future__ import annotations
@@ -139,15 +139,16 @@ def read_columns(
     if block.offset is None:
         return np.ascontiguousarray(read_block(dataset, block, buffer)[:, columns])
     shape = (block.stop - block.start, dataset.shape[1])
+    count = shape[0] * shape[1]
     handle = dataset.file.id.get_vfd_handle()
     # A map reaching past the end of the file would kill the process when touched there.
-    if os.fstat(handle).st_size < block.offset + shape[0] * shape[1] * _FLOAT32.itemsize:
+    if os.fstat(handle).st_size < block.offset + count * _FLOAT32.itemsize:
         raise IndexFileError(f"{dataset.file.filename}: the file ends inside the signatures")
     start = block.offset - block.offset % mmap.ALLOCATIONGRANULARITY
     skip = block.offset - start
-    length = skip + shape[0] * shape[1] * _FLOAT32.itemsize
+    length = skip + count * _FLOAT32.itemsize
     with mmap.mmap(handle, length, prot=mmap.PROT_READ, offset=start) as mapped:
-        rows = np.frombuffer(mapped, _FLOAT32, shape[0] * shape[1], skip).reshape(shape)
+        rows = np.frombuffer(mapped, _FLOAT32, count, skip).reshape(shape)
         values = np.ascontiguousarray(rows[:, columns])
         del rows  # the map closes only once no array views it
     return values
