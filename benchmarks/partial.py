@@ -283,6 +283,8 @@ def _own_whole_table(results: dict[str, dict]) -> list[str]:
 def _genus_table(data: dict) -> list[str]:
     """SHREC 2007's genus outliers and their FT against their classes' other queries."""
     labels = np.array(data["labels"])
+    if max(collections.Counter(labels).values()) < 2:
+        return ["Not measured: no class has two meshes at this --every."]
     chi = data["chi"]
     common = {c: collections.Counter(chi[labels == c]).most_common(1)[0][0] for c in set(labels)}
     outlier = np.array([chi[i] != common[c] for i, c in enumerate(labels)])
