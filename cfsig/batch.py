@@ -267,7 +267,9 @@ def _compute_on_cluster(
     in `_TASK_SECONDS` (at most `_MAX_BATCH`, one until a first batch is back): Dask's cost per
     task is then paid once per batch, not per file (docs/index-scale.md). A batch whose task
     fails as a whole (its worker died, and Dask's retries too) is sent again file by file, so
-    that a bad file fails alone, as it would in a task of its own.
+    that a bad file fails alone, as it would in a task of its own. A worker's death also fails
+    the tasks queued behind on it, so a file whose own task failed is sent once more with
+    nothing else in flight, and reported as failed only if it fails then.
     """
     try:
         from distributed import Client, as_completed
@@ -284,21 +286,30 @@ def _compute_on_cluster(
         pending = iter(paths)
         running: dict = {}
         alone: list[Path] = []  # the files of batches that failed as a whole, to send one by one
+        suspects: list[Path] = []  # files whose own task failed, to send with nothing beside
+        solo: set = set()  # the future of the suspect in flight
         seconds, done = 0.0, 0  # work reported by the workers, and the files it took
 
         def submit(count: int) -> list:
             """Send up to ``count`` more batches to the cluster; return their futures."""
             futures = []
             for _ in range(count):
-                size = max(1, min(_MAX_BATCH, int(_TASK_SECONDS * done / seconds))) if done else 1
-                batch = [alone.pop(0)] if alone else list(islice(pending, size))
+                if solo or (suspects and running):
+                    break  # a suspect runs with nothing beside it
+                suspect = bool(suspects)
+                if suspects or alone:
+                    batch = [(suspects or alone).pop(0)]
+                else:
+                    fit = int(_TASK_SECONDS * done / seconds) if done else 1
+                    batch = list(islice(pending, max(1, min(_MAX_BATCH, fit))))
                 if not batch:
                     break
                 absolute = [str(Path(path).resolve()) for path in batch]
-                futures.append(
-                    client.submit(_work_batch, absolute, params, solver, compute, pure=False)
-                )
-                running[futures[-1]] = batch
+                future = client.submit(_work_batch, absolute, params, solver, compute, pure=False)
+                futures.append(future)
+                running[future] = batch
+                if suspect:
+                    solo.add(future)
             return futures
 
         tasks = as_completed(submit(window), loop=client.loop)
@@ -307,11 +318,14 @@ def _compute_on_cluster(
             try:
                 results, took = future.result()
             except Exception as exc:  # Dask re-raises what failed remotely, or KilledWorker
-                if len(batch) == 1:
+                if future in solo:
                     yield Outcome(batch[0], None, f"{batch[0]}: failed on the cluster: {exc}")
+                elif len(batch) == 1:
+                    suspects.append(batch[0])
                 else:
                     alone.extend(batch)
                 results, took = [], 0.0
+            solo.discard(future)
             seconds, done = seconds + took, done + len(results)
             for path, result in zip(batch, results, strict=False):
                 if isinstance(result, str):
@@ -319,7 +333,7 @@ def _compute_on_cluster(
                 else:
                     yield Outcome(path, result.signature, result.error)
             future.release()
-            tasks.update(submit(1 + (len(batch) > 1 and not results)))
+            tasks.update(submit(window - len(running)))
 
 
 def _signature_file() -> Compute:
