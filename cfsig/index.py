@@ -36,9 +36,10 @@ import numpy as np
 
 from . import __version__
 from .errors import IndexFileError
-from .params import Params, signature_length
+from .params import Params, curvature_slice, signature_length
 from .segments import (
     COLUMNS,
+    CURVATURE_EXTRA,
     META,
     SEGMENT_FORMAT,
     SKETCH_EXTRA,
@@ -142,12 +143,33 @@ class SegmentView:
     sketch : Sketch or None
         Its rows' sketches, the lower bounds a search prunes by; None for a segment written
         before sketches existed, or a format-1 file, which a search scans in full.
+    curvature : ColumnCopy or None
+        The curvature channel's columns stored on their own, which a search of those columns
+        reads instead of the signatures; None for a descriptor without that channel, a segment
+        written before the copy existed, or a format-1 file.
     """
 
     signatures: h5py.Dataset
     start: int
     dead: np.ndarray
     sketch: Sketch | None = None
+    curvature: ColumnCopy | None = None
+
+
+@dataclass(frozen=True)
+class ColumnCopy:
+    """Some adjacent columns of a segment's signatures, stored again as a dataset of their own.
+
+    Attributes
+    ----------
+    rows : h5py.Dataset
+        (rows, columns.stop - columns.start) float32: ``signatures[:, columns]``.
+    columns : slice
+        Where they lie in the signatures, with a step of 1.
+    """
+
+    rows: h5py.Dataset
+    columns: slice
 
 
 class IndexReader:
@@ -209,7 +231,8 @@ class IndexReader:
             views, start = [], 0
             for info, f in zip(manifest.segments, files, strict=True):
                 sketch = _read_sketch(f, self.path / info.file)
-                views.append(SegmentView(f["signatures"], start, dead[info.id], sketch))
+                copy = _read_curvature(f, self.path / info.file)
+                views.append(SegmentView(f["signatures"], start, dead[info.id], sketch, copy))
                 start += info.rows
             return manifest.params, views
         raise AssertionError("unreachable")  # pragma: no cover
@@ -517,7 +540,8 @@ class IndexWriter:
         info = SegmentInfo(old.next_id, rows, rows, 0)
         path = self.path / info.file
         try:
-            write_segment(path, info.id, signature_length(self.params), rows, pieces, drops)
+            width, curvature = signature_length(self.params), curvature_slice(self.params)
+            write_segment(path, info.id, width, rows, pieces, drops, curvature)
             _fsync(path)
             info = replace(info, crc32=file_crc(path))
             ids, dropped = np.unique(drops[:, 0] if new else [], return_counts=True)
@@ -922,6 +946,21 @@ def _read_sketch(f: h5py.File, path: Path) -> Sketch | None:
     if not ok:
         raise IndexFileError(f"{path}: its sketches do not match its signatures")
     return Sketch(f["sketch"], groups.astype(np.int64), center.astype(np.float64), float(error[0]))
+
+
+def _read_curvature(f: h5py.File, path: Path) -> ColumnCopy | None:
+    """A segment's copy of its curvature columns, or None if it has none; checks shapes."""
+    if "curvature" not in f:
+        return None
+    try:
+        columns = f[CURVATURE_EXTRA[0]][:]
+    except KeyError:
+        raise IndexFileError(f"{path}: its curvature copy is incomplete") from None
+    rows, width = f["signatures"].shape
+    first, last = (int(c) for c in columns) if columns.shape == (2,) else (0, 0)
+    if not 0 <= first < last <= width or f["curvature"].shape != (rows, last - first):
+        raise IndexFileError(f"{path}: its curvature copy does not match its signatures")
+    return ColumnCopy(f["curvature"], slice(first, last))
 
 
 def _open_h5(path: Path, index: Path | None = None) -> h5py.File:

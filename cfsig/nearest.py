@@ -14,6 +14,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TypeVar
 
+import h5py
 import numpy as np
 
 from .blocks import Block, plan_blocks, read_block, read_columns, read_rows
@@ -150,16 +151,20 @@ def _scan(
     distances are of those columns of the rows only; with ``score``, the scores of all the
     queries' distances are merged, as ``best``'s one query.
     """
-    blocks = [(view, b) for view in views for b in plan_blocks(view.signatures, _BLOCK_ROWS)]
+    sources = {id(view): _source(view, columns) for view in views}
+    blocks = [(view, b) for view in views for b in plan_blocks(sources[id(view)][0], _BLOCK_ROWS)]
     block_rows = max((b.stop - b.start for _, b in blocks), default=1)
     group = len(queries) if score else max(1, _OUT_CELLS // block_rows)
 
     def work(task: tuple[SegmentView, Block], buffer: np.ndarray, lock: threading.Lock) -> None:
         view, block = task
-        if columns is None:
-            rows = read_block(view.signatures, block, buffer)
+        dataset, wanted = sources[id(view)]
+        space = buffer.reshape(-1)[: buffer.shape[0] * dataset.shape[1]]
+        space = space.reshape(buffer.shape[0], dataset.shape[1])
+        if wanted is None:
+            rows = read_block(dataset, block, space)
         else:
-            rows = read_columns(view.signatures, block, columns, buffer)
+            rows = read_columns(dataset, block, wanted, space)
         dead = view.dead[(view.dead >= block.start) & (view.dead < block.stop)] - block.start
         live = None
         if len(dead):
@@ -174,8 +179,16 @@ def _scan(
             with lock:
                 best.merge(first + q0, view.start + block.start, dist, live)
 
-    width = views[0].signatures.shape[1] if views else queries.shape[1]
+    width = max((dataset.shape[1] for dataset, _ in sources.values()), default=1)
     _parallel(blocks, work, (block_rows, width))
+
+
+def _source(view: SegmentView, columns: slice | None) -> tuple[h5py.Dataset, slice | None]:
+    """What a scan of some columns of a segment reads: its copy of them if it has one."""
+    copy = view.curvature
+    if columns is not None and copy is not None and copy.columns == columns:
+        return copy.rows, None
+    return view.signatures, columns
 
 
 class _Pruned:

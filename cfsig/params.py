@@ -21,6 +21,9 @@ CFHKS_LENGTHS = {
     7: 60 + 64 * 8 + 49 * 4,
     8: 45 + 64 * 8 + 49 * 4,
 }
+# The width of its curvature channel, the vector's last columns (`cfsig.cfhks.channel_columns`),
+# for the versions that have one.
+CFHKS_CURVATURE = {3: 48 * 4, 4: 48 * 4, 5: 49 * 4, 6: 49 * 4, 7: 49 * 4, 8: 49 * 4}
 SOLVERS = ("auto", "cholmod", "eigen", "scipy")  # sparse solver backends (`cfsig.conformal`)
 
 
@@ -154,3 +157,24 @@ def signature_length(params: Params) -> int:
         return params.bins
     assert params.version is not None  # resolved by Params.__post_init__
     return CFHKS_LENGTHS[params.version]
+
+
+def curvature_slice(params: Params) -> slice | None:
+    """Where the curvature channel lies in the signature vectors that ``params`` make.
+
+    Parameters
+    ----------
+    params : Params
+        Signature parameters.
+
+    Returns
+    -------
+    columns : slice or None
+        The last columns of the vector for ``cfhks`` version 3 and later; None for descriptors
+        without that channel.
+    """
+    width = CFHKS_CURVATURE.get(params.version or 0) if params.descriptor == "cfhks" else None
+    if width is None:
+        return None
+    length = signature_length(params)
+    return slice(length - width, length)

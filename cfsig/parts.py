@@ -22,14 +22,14 @@ from functools import partial
 
 import numpy as np
 
-from .cfhks import DESIGNS, Design, channel_columns, curvature_histograms, weigh_curvature
+from .cfhks import DESIGNS, Design, curvature_histograms, weigh_curvature
 from .conformal import Operators, operators
 from .curvature import smoothed_curvature
 from .errors import MeshError, PartialError, SolverError
 from .index import IndexReader
 from .mesh import Mesh, read_mesh
 from .nearest import Hit, l1_distances, nearest
-from .params import Params
+from .params import Params, curvature_slice
 from .simplify import simplified_mesh
 
 SHARES = tuple(2.0 ** (-j / 2) for j in range(7))  # a part's area over its whole's: 1 to 1/8
@@ -57,14 +57,14 @@ def curvature_columns(params: Params) -> slice:
     PartialError
         The descriptor has no curvature channel (``cf``, ``cfhks`` before version 3).
     """
-    design = DESIGNS.get(params.version or 0) if params.descriptor == "cfhks" else None
-    if design is None or not design.scales:
+    columns = curvature_slice(params)
+    if columns is None:
         raise PartialError(
             f"partial queries need the curvature channel of cfhks version 3 or later; this "
             f"index holds {params.descriptor} version {params.version}: rebuild it with "
             f"'cfsig index FOLDER -o NEW --descriptor cfhks'"
         )
-    return channel_columns(design)["curvature"]
+    return columns
 
 
 def partial_vectors(mesh: Mesh, params: Params) -> np.ndarray:

@@ -3,8 +3,9 @@
 A segment holds the rows of one commit (or of several merged by compaction), with the columns
 of the format-1 index file, the sorted 64-bit keys of its names (so that a writer finds a name
 without reading the names), the rows of older segments it supersedes, the sketch of each row
-(`cfsig.sketch`, the lower bounds a search prunes by), and a CRC-32 per chunk of signatures and
-per column. Layout: docs/index-format.md.
+(`cfsig.sketch`, the lower bounds a search prunes by), the curvature channel's columns of the
+signatures stored again on their own (so that a partial query, `cfsig.parts`, reads only them),
+and a CRC-32 per chunk of signatures and per column. Layout: docs/index-format.md.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ _PIECE_CHUNKS = 16  # chunks copied at a time by a merge: bounds its memory
 _SKETCH_CHUNK_ROWS = 65536  # rows per chunk of sketches (8.9 MB at 34 float32): few reads a scan
 _EXTRA = ("key_sorted", "key_rows", "drops", "signature_crc32")
 SKETCH_EXTRA = ("sketch_groups", "sketch_center", "sketch_error")  # with the dataset `sketch`
+CURVATURE_EXTRA = ("curvature_columns",)  # with the dataset `curvature`
 Piece = dict[str, np.ndarray]  # "signatures" (m, length) float32 and every column (m,)
 
 
@@ -98,7 +100,13 @@ def chunk_crcs(signatures: np.ndarray, chunk_rows: int) -> np.ndarray:
 
 
 def write_segment(
-    path: Path, segment_id: int, width: int, rows: int, pieces: Iterable[Piece], drops: np.ndarray
+    path: Path,
+    segment_id: int,
+    width: int,
+    rows: int,
+    pieces: Iterable[Piece],
+    drops: np.ndarray,
+    curvature: slice | None = None,
 ) -> None:
     """Write a segment file from pieces of rows, with the keys of its names, sketches, checksums.
 
@@ -120,6 +128,9 @@ def write_segment(
         `COLUMNS` (m,).
     drops : (d, 2) int64
         (segment, row) of the rows of older segments that rows of this one replace.
+    curvature : slice, optional
+        The curvature channel's columns (`cfsig.params.curvature_slice`): stored again as the
+        dataset ``curvature``, (rows, their number) float32, in chunks of the signatures' rows.
 
     Raises
     ------
@@ -138,6 +149,15 @@ def write_segment(
         sketches = f.create_dataset("sketch", (rows, len(groups)), np.float32, chunks=sketch_chunk)
         columns = {k: f.create_dataset(k, (rows,), _DTYPES[k]) for k in COLUMNS}
         crcs = dict.fromkeys((*COLUMNS, "sketch"), 0)
+        if curvature is not None:
+            first, last, _ = curvature.indices(width)
+            copy = f.create_dataset(
+                "curvature",
+                (rows, last - first),
+                np.float32,
+                chunks=(chunk, last - first) if rows else None,
+            )
+            crcs["curvature"] = 0
         sig_crcs, keys, start = [], [], 0
         for piece in _regroup(pieces, chunk * _PIECE_CHUNKS):
             rows32 = np.asarray(piece["signatures"], np.float32)  # the sketch of what is stored
@@ -150,6 +170,10 @@ def write_segment(
             sketches[start:stop] = sketch
             crcs["sketch"] = column_crc(sketch, crcs["sketch"])
             error = max(error, piece_error)
+            if curvature is not None:
+                values32 = rows32[:, curvature]
+                copy[start:stop] = values32
+                crcs["curvature"] = column_crc(values32, crcs["curvature"])
             for key in COLUMNS:
                 values = np.asarray(piece[key], dtype=columns[key].dtype)
                 columns[key][start:stop] = values
@@ -169,6 +193,8 @@ def write_segment(
             "sketch_center": center,
             "sketch_error": np.array([error]),
         }
+        if curvature is not None:
+            extra["curvature_columns"] = np.array([first, last], np.int64)
         for key, values in extra.items():
             f.create_dataset(key, data=values)
         f.attrs.update({f"crc32_{k}": np.uint32(v) for k, v in crcs.items()})
@@ -193,8 +219,8 @@ def scan_segment(
     Yields
     ------
     piece : dict
-        As `write_segment` takes it, strings as ``str``. A segment's sketches are checked, not
-        yielded (a segment written before sketches existed has none).
+        As `write_segment` takes it, strings as ``str``. A segment's sketches and curvature
+        copy are checked, not yielded (a segment written before they existed has none).
 
     Raises
     ------
@@ -203,15 +229,16 @@ def scan_segment(
         piece).
     """
     sigs = f["signatures"]
-    n, verify, sketched = sigs.shape[0], "signature_crc32" in f, "sketch" in f
+    n, verify = sigs.shape[0], "signature_crc32" in f
     chunk = sigs.chunks[0] if sigs.chunks else _CHUNK_ROWS
     step = chunk * _PIECE_CHUNKS
     want = f["signature_crc32"][:] if verify else None
-    crcs = dict.fromkeys((*COLUMNS, "sketch") if sketched else COLUMNS, 0)
+    derived = [k for k in ("sketch", "curvature") if k in f]
+    crcs = dict.fromkeys((*COLUMNS, *derived), 0)
     for start in range(0, n, step):
         stop = min(start + step, n)
-        if sketched:  # checked, not yielded: a new segment computes its own
-            crcs["sketch"] = column_crc(f["sketch"][start:stop], crcs["sketch"])
+        for key in derived:  # checked, not yielded: a new segment computes its own
+            crcs[key] = column_crc(f[key][start:stop], crcs[key])
         piece = {"signatures": sigs[start:stop]}
         for key in COLUMNS:
             piece[key] = f[key][start:stop]  # strings as bytes: checked before they are decoded
@@ -228,7 +255,8 @@ def scan_segment(
         yield {key: values[keep] for key, values in piece.items()}
     if not verify:
         return
-    for key in (*_EXTRA, *SKETCH_EXTRA) if sketched else _EXTRA:
+    extras = {"sketch": SKETCH_EXTRA, "curvature": CURVATURE_EXTRA}
+    for key in (*_EXTRA, *(e for k in derived for e in extras[k])):
         crcs[key] = column_crc(f[key][:])
     for key, crc in crcs.items():
         if crc != int(f.attrs.get(f"crc32_{key}", -1)):

@@ -12,7 +12,7 @@ from cfsig.curvature import smoothed_curvature
 from cfsig.errors import SolverError
 from cfsig.index import IndexReader, IndexWriter, check_index
 from cfsig.mesh import clean_mesh
-from cfsig.params import VERSIONS, Params, signature_length
+from cfsig.params import VERSIONS, Params, curvature_slice, signature_length
 from cfsig.signature import compute_signature, needs_phi
 from tests.helpers import (
     disk,
@@ -350,6 +350,8 @@ def test_channel_columns_are_where_weigh_puts_each_channel(version):
         expected = cfhks.weigh({**parts, name: 0 * parts[name]}, design)
         changed = np.flatnonzero(vector != expected)
         assert np.array_equal(changed, np.arange(len(vector))[where])
+    stored = curvature_slice(Params(descriptor="cfhks", version=version))
+    assert stored == (columns["curvature"] if design.scales else None)
 
 
 def test_index_builds_an_older_version_when_asked_and_refuses_an_unknown_one(collection, tmp_path):

@@ -1,6 +1,7 @@
 """Sketches: their bounds, and the pruned search giving exactly the full scan's results, on
 random and structured rows, with ties, superseded rows, several segments, segments without
-sketches; `cfsig check` on sketches; indexes written before sketches."""
+sketches; `cfsig check` on sketches; indexes written before sketches. The copy of the curvature
+columns, which a search of those columns reads instead of the rows, checked in the same ways."""
 
 from dataclasses import replace
 
@@ -14,7 +15,7 @@ import cfsig.segments
 from cfsig.errors import IndexFileError
 from cfsig.index import Entry, IndexReader, IndexWriter, check_index, compact_index, file_crc
 from cfsig.nearest import nearest
-from cfsig.params import Params, signature_length
+from cfsig.params import Params, curvature_slice, signature_length
 from cfsig.signature import Signature
 from cfsig.sketch import (
     Sketch,
@@ -182,8 +183,10 @@ def test_rows_with_nan_or_infinity_are_not_lost(tmp_path, monkeypatch, small_blo
         assert np.array_equal(nearest(r, rows[[0]], 5)[0], rows_f[:1, :5])
 
 
-@pytest.mark.parametrize("part", ["sketch", "sketch_center", "sketch_error"])
-def test_check_finds_a_flipped_byte_in_the_sketches(tmp_path, part):
+@pytest.mark.parametrize(
+    "part", ["sketch", "sketch_center", "sketch_error", "curvature", "curvature_columns"]
+)
+def test_check_finds_a_flipped_byte_in_the_sketches_and_the_copy(tmp_path, part):
     _write(tmp_path / "i", _structured(40, 8), [f"c/{i}.off" for i in range(40)])
     (segment,) = (tmp_path / "i").glob("seg-*.h5")
     assert check_index(tmp_path / "i") == []
@@ -209,3 +212,62 @@ def test_sketches_that_do_not_fit_their_rows_are_refused(tmp_path):
         del f["sketch_center"]
     with pytest.raises(IndexFileError, match="sketches are incomplete"):
         IndexReader(tmp_path / "i")
+
+
+def test_a_copy_that_does_not_fit_its_rows_is_refused(tmp_path):
+    _write(tmp_path / "i", _structured(40, 9), [f"c/{i}.off" for i in range(40)])
+    (segment,) = (tmp_path / "i").glob("seg-*.h5")
+    with h5py.File(segment, "r+") as f:
+        first, last = f["curvature_columns"][:]
+        del f["curvature_columns"]
+        f["curvature_columns"] = [first + 1, last]
+    with pytest.raises(IndexFileError, match="curvature copy does not match its signatures"):
+        IndexReader(tmp_path / "i")
+    with h5py.File(segment, "r+") as f:
+        del f["curvature_columns"]
+    with pytest.raises(IndexFileError, match="curvature copy is incomplete"):
+        IndexReader(tmp_path / "i")
+
+
+def test_a_search_of_the_curvature_reads_the_copy(tmp_path, monkeypatch, small_blocks, kernel):
+    rows, queries = np.split(_structured(305, 10), [300])
+    index, columns = tmp_path / "i", curvature_slice(CFHKS)
+    _write(index, rows[:150], [f"a/{i}.off" for i in range(150)])
+    _strip_copy(index)  # as code from before the copy wrote it
+    _write(
+        index, rows[150:] + 0.5, [f"a/{i}.off" for i in range(20)] + [f"b/{i}" for i in range(130)]
+    )
+    read = []
+    real = cfsig.nearest.read_columns
+    monkeypatch.setattr(
+        cfsig.nearest, "read_columns", lambda d, *a: read.append(d.file.filename) or real(d, *a)
+    )
+    with IndexReader(index) as r:
+        first, second = r.segments
+        assert first.curvature is None and second.curvature is not None
+        assert np.array_equal(second.curvature.rows[:], second.signatures[:, columns])
+        got_rows, got = nearest(r, queries[:, columns], 9, columns)
+        stored = r.signatures[:]
+    manifest = cfsig.index.read_manifest(index)
+    assert set(read) == {str(index / manifest.segments[0].file)}  # rows only where no copy
+    brute = np.abs(queries[:, None, columns] - stored[None, :, columns]).sum(axis=2)
+    assert np.allclose(got, np.sort(brute, axis=1)[:, :9], rtol=1e-5)
+    assert np.allclose(got, np.take_along_axis(brute, got_rows, axis=1), rtol=1e-5)
+    assert check_index(index) == []
+    compact_index(index)  # the merged segment has a copy of every row
+    with IndexReader(index) as r:
+        (only,) = r.segments
+        assert np.array_equal(only.curvature.rows[:], only.signatures[:, columns])
+        assert np.array_equal(nearest(r, queries[:, columns], 9, columns)[1], got)
+
+
+def _strip_copy(index):
+    """Remove the curvature copy of an index's last segment, and record its new checksum."""
+    manifest = cfsig.index.read_manifest(index)
+    last = manifest.segments[-1]
+    with h5py.File(index / last.file, "r+") as f:
+        for key in ("curvature", *cfsig.segments.CURVATURE_EXTRA):
+            del f[key]
+            del f.attrs[f"crc32_{key}"]
+    segments = (*manifest.segments[:-1], replace(last, crc32=file_crc(index / last.file)))
+    cfsig.index.write_manifest(index, replace(manifest, segments=segments))
