@@ -374,9 +374,10 @@ def query(index_file, meshes, k, solver, as_json, png, partial) -> None:
     """Find the k indexed meshes nearest to each query mesh (L1 distance).
 
     The query signatures are computed with the index's own parameters. With --partial the
-    first result is the whole whose curvature at small scales matches the part's best, the
-    others the meshes nearest to that whole, with their distances to it (docs/method.md);
-    it needs an index of cfhks version 3 or later. In the --png picture a query whose folder
+    first result is the whole whose curvature at small scales matches the part's best (the
+    text output gives its partial distance, 0 to 3, after the query's name), the others the
+    meshes nearest to that whole, with their distances to it (docs/method.md); it needs an
+    index of cfhks version 3 or later. In the --png picture a query whose folder
     name is a class of the index has its results framed green (same class) or orange.
 
     \b
@@ -394,11 +395,10 @@ def query(index_file, meshes, k, solver, as_json, png, partial) -> None:
 
     try:
         with IndexReader(index_file) as reader:
+            fits: list[float] = []
             if partial:
-                results = [
-                    partial_search(reader, partial_file(path, reader.params), k)[0]
-                    for path in meshes
-                ]
+                found = [partial_search(reader, partial_file(p, reader.params), k) for p in meshes]
+                results, fits = [hits for hits, _ in found], [fit for _, fit in found]
             else:
                 sigs = [signature_file(path, reader.params, solver).vector for path in meshes]
                 results = search(reader, np.array(sigs), k)
@@ -422,8 +422,8 @@ def query(index_file, meshes, k, solver, as_json, png, partial) -> None:
         ]
         click.echo(json.dumps(lists[0] if len(lists) == 1 else lists, indent=2))
         return
-    for path, hits in zip(meshes, results, strict=True):
-        click.echo(f"# {path}")
+    for i, (path, hits) in enumerate(zip(meshes, results, strict=True)):
+        click.echo(f"# {path}" + (f"  (partial distance {fits[i]:.4f})" if fits else ""))
         for h in hits:
             click.echo(f"{h.rank:4d}  {h.distance:.4f}  {h.entry.name}  {h.entry.label}")
 

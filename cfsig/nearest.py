@@ -159,6 +159,7 @@ def _scan(
     def work(task: tuple[SegmentView, Block], buffer: np.ndarray, lock: threading.Lock) -> None:
         view, block = task
         dataset, wanted = sources[id(view)]
+        # The buffer fits a block of the widest dataset read; this one's rows are laid out in it.
         space = buffer.reshape(-1)[: buffer.shape[0] * dataset.shape[1]]
         space = space.reshape(buffer.shape[0], dataset.shape[1])
         if wanted is None:

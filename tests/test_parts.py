@@ -116,6 +116,10 @@ def test_query_partial_finds_the_whole(wholes):
         hits = json.loads(result.output)
         assert hits[0]["label"] == name and hits[0]["distance"] == 0.0
         assert [h["rank"] for h in hits] == list(range(1, len(hits) + 1))
+        text = CliRunner().invoke(main, ["query", str(index), str(part), "--partial"]).output
+        with IndexReader(index) as reader:
+            fit = partial_search(reader, partial_file(part, reader.params), 3)[1]
+        assert text.splitlines()[0] == f"# {part}  (partial distance {fit:.4f})" and fit > 0
 
 
 def test_partial_scores_are_the_unexplained_share_plus_the_distance():
