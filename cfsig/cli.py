@@ -26,6 +26,7 @@ EXIT_ERROR = 1
 EXIT_SKIPPED = 3
 RETRIEVAL_DESCRIPTOR = "cfhks"  # the default of index and evaluate: docs/descriptors.md
 _GRID_COLUMNS = 7  # tiles per row of a single query's --png grid
+LOG_SECONDS = 60.0  # the progress bar's redraws into a file (a batch job's log): one a minute
 _FILE = click.Path(dir_okay=False, path_type=Path)
 _FOLDER = click.Path(file_okay=False, path_type=Path)
 _PATH = click.Path(path_type=Path)  # a file or a folder
@@ -334,15 +335,19 @@ def index(
 def _progress(iterable, total: Callable[[], int], what: str, routes: Counter[str]):
     """A tqdm progress bar on standard error, counting the repair routes of what passes.
 
-    Its total is the number of files found so far: it grows while a folder is being scanned.
+    Its total is the number of files found so far: it grows while a folder is being scanned,
+    and shows at the bar's next redraw. The bar is redrawn up to ten times a second on a
+    terminal, and once every `LOG_SECONDS` into a file, so that a batch job's log stays small.
     """
     from tqdm import tqdm
 
-    bar = tqdm(iterable, total=total(), desc=what, unit="mesh", file=sys.stderr, leave=False)
+    interval = 0.1 if sys.stderr.isatty() else LOG_SECONDS
+    bar = tqdm(
+        iterable, total=total(), desc=what, unit="mesh", file=sys.stderr, leave=False,
+        mininterval=interval, maxinterval=max(interval, 10.0),
+    )  # fmt: skip
     for outcome in bar:
-        if bar.total != total():
-            bar.total = total()
-            bar.refresh()
+        bar.total = total()
         if outcome.signature is not None:
             routes[outcome.signature.route] += 1
         yield outcome

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+import cfsig.cli
 from cfsig import __version__
 from cfsig.cli import EXIT_SKIPPED, main
 from cfsig.demo import make_demo_collection
@@ -105,6 +106,14 @@ def test_index_skips_bad_files_with_distinct_status(collection, tmp_path):
     assert "1 in the index" in result.output and "bad.off" in result.output
     strict = _run("index", folder.parent, "-o", tmp_path / "j.h5", "-j", "1", "--strict")
     assert strict.exit_code == 1
+
+
+def test_progress_into_a_log_is_redrawn_once_a_minute(collection, tmp_path, monkeypatch):
+    quick = _run("index", collection, "-o", tmp_path / "a", "-j", "1")
+    assert quick.exit_code == 0 and quick.stderr.count("indexing") == 1  # its first draw only
+    monkeypatch.setattr(cfsig.cli, "LOG_SECONDS", 0.0)
+    every = _run("index", collection, "-o", tmp_path / "b", "-j", "1")
+    assert every.stderr.count("indexing") > len(list(collection.rglob("*.off")))
 
 
 def test_query_text_and_json(built_index, collection):
