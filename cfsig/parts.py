@@ -92,13 +92,55 @@ def partial_vectors(mesh: Mesh, params: Params) -> np.ndarray:
     curvature_columns(params)
     assert params.version is not None  # checked by curvature_columns
     design = DESIGNS[params.version]
+    return np.array(
+        [
+            weigh_curvature(curvature_histograms(values, areas, design.bins), design)
+            for values, areas in share_curvatures(mesh, params)
+        ]
+    )
+
+
+def share_curvatures(
+    mesh: Mesh, params: Params, shares: tuple[float, ...] = SHARES
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The curvature at scales of a part, measured as if it were each share of its whole.
+
+    For a share ``f``, at the diffusion times ``s * area / f`` of the design's scales ``s``, the
+    values divided by ``f`` (the module's docstring); `partial_vectors` holds their histograms.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The part; its boundary may be open.
+    params : Params
+        The index's parameters.
+    shares : tuple of float
+        The shares, in (0, 1].
+
+    Returns
+    -------
+    curvatures : list of (values, areas), one per share
+        ``values`` (n, len(scales)) float64, dimensionless, at the vertices of the surface it was
+        measured on (the part, or its simplified copy of ``f * coarse`` faces); ``areas`` (n,)
+        float64, their vertex areas.
+
+    Raises
+    ------
+    PartialError
+        As `curvature_columns`.
+    SolverError
+        A curvature diffusion failed.
+    """
+    curvature_columns(params)
+    assert params.version is not None  # checked by curvature_columns
+    design = DESIGNS[params.version]
     if not design.curvature_on_copy:
-        return _share_vectors(operators(mesh, params.mollify), design, SHARES)
+        return _share_values(operators(mesh, params.mollify), design, shares)
     # The wholes' curvature is measured on copies of `coarse` faces (`cfsig.cfhks`): a part
     # that is a share f of its whole is simplified to f times as many. The part's own operators
     # serve the shares it has too few faces to simplify for, built once if any.
-    rows, whole = [], None
-    for share in SHARES:
+    curvatures, whole = [], None
+    for share in shares:
         copy = simplified_mesh(mesh, round(design.coarse * share))
         if copy is not None:
             surface = operators(copy)
@@ -106,12 +148,14 @@ def partial_vectors(mesh: Mesh, params: Params) -> np.ndarray:
             if whole is None:
                 whole = operators(mesh, params.mollify)
             surface = whole
-        rows.append(_share_vectors(surface, design, (share,)))
-    return np.concatenate(rows)
+        curvatures += _share_values(surface, design, (share,))
+    return curvatures
 
 
-def _share_vectors(ops: Operators, design: Design, shares: tuple[float, ...]) -> np.ndarray:
-    """`partial_vectors` of a part's operators for some shares of `SHARES`."""
+def _share_values(
+    ops: Operators, design: Design, shares: tuple[float, ...]
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """`share_curvatures` of a part's operators for some shares."""
     fractions = np.asarray(shares)
     scales = np.asarray(design.scales)[None, :] / fractions[:, None]  # (shares, scales)
     # Quadrupling scales over shares a factor 2 apart in area meet: each distinct one once.
@@ -119,14 +163,7 @@ def _share_vectors(ops: Operators, design: Design, shares: tuple[float, ...]) ->
     values = smoothed_curvature(ops, tuple(distinct), design.tolerance, design.predict)
     values = values[:, where.reshape(scales.shape)]
     values /= fractions[:, None]
-    return np.array(
-        [
-            weigh_curvature(
-                curvature_histograms(values[:, i], ops.vertex_area, design.bins), design
-            )
-            for i in range(len(shares))
-        ]
-    )
+    return [(values[:, i], ops.vertex_area) for i in range(len(shares))]
 
 
 def partial_search(

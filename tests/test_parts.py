@@ -22,6 +22,7 @@ from cfsig.parts import (
     partial_scores,
     partial_search,
     partial_vectors,
+    share_curvatures,
     share_queries,
 )
 from cfsig.signature import compute_signature
@@ -72,6 +73,17 @@ def test_a_whole_as_its_own_part_matches_its_signature(version, levels):
     else:
         other = compute_signature(clean_mesh(*torus()), params).vector[columns]
         assert np.abs(vectors[0] - stored).sum() < 0.05 * np.abs(other - stored).sum()
+
+
+def test_share_curvatures_are_what_partial_vectors_histogram():
+    mesh = clean_mesh(*_bumpy(levels=4))  # more faces than a copy: measured on copies
+    design = cfhks.DESIGNS[CFHKS.version]
+    ((values, areas),) = share_curvatures(mesh, CFHKS, (SHARES[2],))
+    assert values.shape == (len(areas), len(design.scales)) and np.all(areas > 0)
+    histograms = cfhks.curvature_histograms(values, areas, design.bins)
+    assert np.array_equal(
+        cfhks.weigh_curvature(histograms, design), partial_vectors(mesh, CFHKS)[2]
+    )
 
 
 def test_evaluate_queries_by_hand():
