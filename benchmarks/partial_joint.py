@@ -13,7 +13,10 @@ measured on the same surfaces (`cfsig.parts.share_curvatures`):
 - ``joint B``: the histograms of each pair of adjacent scales jointly, on B x B bins of the same
   axis (``asinh(value / CURVATURE_UNIT)`` on [-CURVATURE_RANGE, CURVATURE_RANGE]), three pairs:
   where a vertex's curvature lies at one scale and at the next, which the marginals forget;
-- ``both B``: the two partial distances summed.
+- ``band B D``: the joint histograms with the second scale's bin taken relative to the first's
+  and clipped to within D bins of it: B x (2 D + 1) cells a pair, where nearly all the mass of
+  the B x B lies (adjacent scales' values are close);
+- ``both B``: the marginal and the joint partial distances summed.
 
 For each, NN per collection and kind, and the first tier of the ``--partial`` ranking (the
 nearest whole first, then the others by their whole-shape distance to it). The feature and B are
@@ -47,9 +50,12 @@ from cfsig.signature import compute_signature
 
 ROOT = Path(__file__).resolve().parents[1]
 BINS = (8, 12, 16, 24)  # B, bins per axis of the joint histograms
+BANDS = ((16, 3), (24, 4))  # (B, D) of the banded joint histograms
 
 
-def joint_histograms(values: np.ndarray, areas: np.ndarray, bins: int) -> np.ndarray:
+def joint_histograms(
+    values: np.ndarray, areas: np.ndarray, bins: int, band: int | None = None
+) -> np.ndarray:
     """The joint histograms of each pair of adjacent scales, area-weighted, each summing to 1.
 
     Parameters
@@ -60,18 +66,30 @@ def joint_histograms(values: np.ndarray, areas: np.ndarray, bins: int) -> np.nda
         Vertex areas.
     bins : int
         Bins per axis.
+    band : int, optional
+        Keep only the cells within this many bins of the diagonal, the second scale's bin
+        clipped into them.
 
     Returns
     -------
-    histograms : ((k - 1) * bins * bins,) float64
+    histograms : ((k - 1) * bins * width,) float64
+        ``width`` is ``bins``, or ``2 * band + 1`` with ``band``.
     """
     position = (np.arcsinh(values / CURVATURE_UNIT) + CURVATURE_RANGE) * (
         bins / (2 * CURVATURE_RANGE)
     )
     cell = np.clip(position, 0, bins - 1).astype(np.intp)
     fractions = areas / areas.sum()
-    pairs = [cell[:, a] * bins + cell[:, a + 1] for a in range(values.shape[1] - 1)]
-    return np.concatenate([np.bincount(p, weights=fractions, minlength=bins**2) for p in pairs])
+    first, second = cell[:, :-1], cell[:, 1:]
+    if band is None:
+        width = bins
+    else:
+        width = 2 * band + 1
+        second = np.clip(second - first, -band, band) + band
+    pairs = (first * width + second).T
+    return np.concatenate(
+        [np.bincount(p, weights=fractions, minlength=bins * width) for p in pairs]
+    )
 
 
 def _features(curvatures: list[tuple[np.ndarray, np.ndarray]]) -> dict[str, np.ndarray]:
@@ -83,6 +101,8 @@ def _features(curvatures: list[tuple[np.ndarray, np.ndarray]]) -> dict[str, np.n
     }
     for b in BINS:
         rows[f"joint {b}"] = [joint_histograms(v, a, b) for v, a in curvatures]
+    for b, d in BANDS:
+        rows[f"band {b} {d}"] = [joint_histograms(v, a, b, d) for v, a in curvatures]
     return {name: np.array(r) for name, r in rows.items()}
 
 
@@ -110,8 +130,10 @@ def _scores(parts: list[dict], wholes: np.ndarray, name: str) -> np.ndarray:
     )
 
 
-def measure(name: str, data_root: Path, jobs: int) -> dict[str, dict[str, tuple[float, float]]]:
-    """(NN, --partial FT) of each feature and kind on one collection."""
+def measure(
+    name: str, data_root: Path, jobs: int
+) -> tuple[dict[str, dict[str, tuple[float, float]]], dict[str, int]]:
+    """(NN, --partial FT) of each feature and kind on one collection; each feature's columns."""
     paths = sorted((data_root / name).glob("*/*.off"))
     if not paths:
         raise SystemExit(f"no meshes under {data_root / name}: ../shared/data/unpack {name}")
@@ -120,13 +142,16 @@ def measure(name: str, data_root: Path, jobs: int) -> dict[str, dict[str, tuple[
         rows = list(pool.map(_one, [(p, i) for i, p in enumerate(paths)], chunksize=2))
     signatures = np.array([r["default"] for r in rows])
     whole_distances = l1_distances(signatures, signatures)
-    names = ["marginal", *(f"joint {b}" for b in BINS), *(f"both {b}" for b in BINS)]
+    joint = [*(f"joint {b}" for b in BINS), *(f"band {b} {d}" for b, d in BANDS)]
+    names = ["marginal", *joint, *(f"both {b}" for b in BINS)]
     results: dict[str, dict[str, tuple[float, float]]] = {n: {} for n in names}
+    width = {n: rows[0]["whole"][n.replace("both", "joint")].shape[1] for n in names}
+    columns = {n: width[n] + (width["marginal"] if n.startswith("both") else 0) for n in names}
     for kind in KINDS:
         parts = [r[kind] for r in rows]
         single = {
             feature: _scores(parts, np.array([r["whole"][feature][0] for r in rows]), feature)
-            for feature in ("marginal", *(f"joint {b}" for b in BINS))
+            for feature in ("marginal", *joint)
         }
         for n in names:
             scores = (
@@ -141,7 +166,7 @@ def measure(name: str, data_root: Path, jobs: int) -> dict[str, dict[str, tuple[
             ft = evaluate_queries(expanded, labels, labels).measures["FT"]
             results[n][kind] = (nn, ft)
         print(name, kind, "done", flush=True)
-    return results
+    return results, columns
 
 
 def main() -> None:
@@ -150,23 +175,27 @@ def main() -> None:
     parser.add_argument("--data-root", type=Path, default=ROOT.parent / "shared" / "data")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     args = parser.parse_args()
-    results = {name: measure(name, args.data_root, args.jobs) for name in COLLECTIONS}
-    chosen = max(
-        results["shrec07"], key=lambda n: np.mean([nn for nn, _ in results["shrec07"][n].values()])
-    )
+    measured = {name: measure(name, args.data_root, args.jobs) for name in COLLECTIONS}
+    results, columns = {n: r for n, (r, _) in measured.items()}, measured["shrec07"][1]
+    chosen = max(results["shrec07"], key=lambda n: _mean_nn(results["shrec07"][n]))
     heads = [f"{name} {kind}" for name in COLLECTIONS for kind in KINDS]
     print(f"\nNN, then the `--partial` ranking's FT, of {len(SHARES)} shares per part:\n")
-    print(f"| feature | {' | '.join(heads)} | SHREC 2007 mean NN |")
-    print("|---|" + "---|" * (len(heads) + 1))
+    print(f"| feature | columns a row | {' | '.join(heads)} | SHREC 2007 mean NN |")
+    print("|---|" + "---|" * (len(heads) + 2))
     for n in results["shrec07"]:
         cells = [
             f"{results[c][n][k][0]:.3f} / {results[c][n][k][1]:.3f}"
             for c in COLLECTIONS
             for k in KINDS
         ]
-        mean = np.mean([nn for nn, _ in results["shrec07"][n].values()])
+        mean = _mean_nn(results["shrec07"][n])
         mark = " (chosen)" if n == chosen else ""
-        print(f"| {n}{mark} | {' | '.join(cells)} | {mean:.3f} |")
+        print(f"| {n}{mark} | {columns[n]} | {' | '.join(cells)} | {mean:.3f} |")
+
+
+def _mean_nn(kinds: dict[str, tuple[float, float]]) -> float:
+    """The mean NN over the kinds of parts."""
+    return float(np.mean([kinds[k][0] for k in KINDS]))
 
 
 if __name__ == "__main__":
