@@ -327,7 +327,8 @@ def scale(rows: int, real: str, folder: Path) -> str:
     sys.path.insert(0, str(ROOT))
     from benchmarks.index_scale import K, build, in_child, real_rows
 
-    path = folder / f"mixed-{rows}"
+    # Not index_scale.py's name for the same rows: its commit timings add rows to what it reuses.
+    path = folder / f"partial-mixed-{rows}"
     built = None if (path / "manifest.h5").exists() else build(path, rows, real_rows(real))
     code = f"""
 import numpy as np
