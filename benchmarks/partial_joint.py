@@ -21,8 +21,12 @@ measured on the same surfaces (`cfsig.parts.share_curvatures`):
 For each, NN per collection and kind, and the first tier of the ``--partial`` ranking (the
 nearest whole first, then the others by their whole-shape distance to it). The feature and B are
 chosen on SHREC 2007 alone, by the mean NN over its three kinds, as the partial distance's
-weight was; McGill and FAUST are reported, not used. Nothing here is stored in an index: it
-measures what such a channel would buy before it is built (its cost: 3 B^2 columns a row).
+weight was; McGill and FAUST are reported, not used. A second table asks what each feature
+would do for whole shapes in place of the default's curvature channel: the default's vectors
+with their curvature columns replaced by the feature, scaled so that its median distance over
+SHREC 2007's pairs is the marginals' (version 3's rule for the channel's divisor), every mesh a
+query against the rest of its collection. Nothing here is stored in an index: it measures what
+such a channel would buy before it is built.
 """
 
 from __future__ import annotations
@@ -41,10 +45,10 @@ import numpy as np
 from partial import COLLECTIONS, DEFAULT, DESIGN, KINDS, cut, holes, scan
 
 from cfsig.cfhks import CURVATURE_RANGE, CURVATURE_UNIT, curvature_histograms, weigh_curvature
-from cfsig.measures import evaluate_queries
+from cfsig.measures import evaluate_distances, evaluate_queries
 from cfsig.mesh import read_mesh
 from cfsig.nearest import l1_distances
-from cfsig.parts import SHARES, partial_scores, share_curvatures, share_queries
+from cfsig.parts import SHARES, curvature_columns, partial_scores, share_curvatures, share_queries
 from cfsig.repair import repair_mesh
 from cfsig.signature import compute_signature
 
@@ -130,10 +134,10 @@ def _scores(parts: list[dict], wholes: np.ndarray, name: str) -> np.ndarray:
     )
 
 
-def measure(
-    name: str, data_root: Path, jobs: int
-) -> tuple[dict[str, dict[str, tuple[float, float]]], dict[str, int]]:
-    """(NN, --partial FT) of each feature and kind on one collection; each feature's columns."""
+def measure(name: str, data_root: Path, jobs: int) -> dict:
+    """One collection: ``"parts"``, (NN, --partial FT) of each feature and kind; ``"columns"``,
+    each feature's columns; ``"labels"``, ``"signatures"`` and ``"wholes"`` (each single
+    feature's rows) of its meshes."""
     paths = sorted((data_root / name).glob("*/*.off"))
     if not paths:
         raise SystemExit(f"no meshes under {data_root / name}: ../shared/data/unpack {name}")
@@ -166,7 +170,35 @@ def measure(
             ft = evaluate_queries(expanded, labels, labels).measures["FT"]
             results[n][kind] = (nn, ft)
         print(name, kind, "done", flush=True)
-    return results, columns
+    wholes = {f: np.array([r["whole"][f][0] for r in rows]) for f in ("marginal", *joint)}
+    return {
+        "parts": results,
+        "columns": columns,
+        "labels": labels,
+        "signatures": signatures,
+        "wholes": wholes,
+    }
+
+
+def whole_table(measured: dict[str, dict]) -> list[str]:
+    """NN and FT of whole shapes with each single feature as the curvature channel."""
+    columns = curvature_columns(DEFAULT)
+    heads = " | ".join(f"{c} NN | {c} FT" for c in COLLECTIONS)
+    lines = [f"| curvature channel | scale | {heads} |", "|---|---|" + "---|---|" * 3]
+    shrec = measured["shrec07"]["wholes"]
+    pairs = np.triu_indices(len(shrec["marginal"]), 1)
+    median = {f: np.median(l1_distances(x, x)[pairs]) for f, x in shrec.items()}
+    for feature in shrec:
+        scale = median["marginal"] / median[feature]
+        cells = []
+        for name in COLLECTIONS:
+            data = measured[name]
+            head = data["signatures"][:, : columns.start]  # the channels before the curvature
+            vectors = np.hstack([head, scale * data["wholes"][feature]])
+            m = evaluate_distances(l1_distances(vectors, vectors), data["labels"]).measures
+            cells.append(f"{m['NN']:.3f} | {m['FT']:.3f}")
+        lines.append(f"| {feature} | {scale:.4f} | {' | '.join(cells)} |")
+    return lines
 
 
 def main() -> None:
@@ -176,7 +208,8 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     args = parser.parse_args()
     measured = {name: measure(name, args.data_root, args.jobs) for name in COLLECTIONS}
-    results, columns = {n: r for n, (r, _) in measured.items()}, measured["shrec07"][1]
+    results = {name: data["parts"] for name, data in measured.items()}
+    columns = measured["shrec07"]["columns"]
     chosen = max(results["shrec07"], key=lambda n: _mean_nn(results["shrec07"][n]))
     heads = [f"{name} {kind}" for name in COLLECTIONS for kind in KINDS]
     print(f"\nNN, then the `--partial` ranking's FT, of {len(SHARES)} shares per part:\n")
@@ -191,6 +224,8 @@ def main() -> None:
         mean = _mean_nn(results["shrec07"][n])
         mark = " (chosen)" if n == chosen else ""
         print(f"| {n}{mark} | {columns[n]} | {' | '.join(cells)} | {mean:.3f} |")
+    print("\nWhole shapes, each feature in place of the default's curvature channel:\n")
+    print("\n".join(whole_table(measured)))
 
 
 def _mean_nn(kinds: dict[str, tuple[float, float]]) -> float:
