@@ -5,7 +5,7 @@
 Makes the parts of ``benchmarks/partial.py`` (the same cuts, bodies with holes and scans, from
 the same seeds) of every mesh of SHREC 2007, McGill and FAUST, and ranks the whole shapes for
 each part by the partial distance (`cfsig.parts.partial_scores`: unexplained share plus L1
-distance, at the best share) of three features of the curvature at the default's four scales,
+distance, at the best share) of features of the curvature at the default's four scales,
 measured on the same surfaces (`cfsig.parts.share_curvatures`):
 
 - ``marginal``: its histograms per scale, the index's curvature channel, what ``--partial``
@@ -24,9 +24,9 @@ chosen on SHREC 2007 alone, by the mean NN over its three kinds, as the partial 
 weight was; McGill and FAUST are reported, not used. A second table asks what each feature
 would do for whole shapes in place of the default's curvature channel: the default's vectors
 with their curvature columns replaced by the feature, scaled so that its median distance over
-SHREC 2007's pairs is the marginals' (version 3's rule for the channel's divisor), every mesh a
-query against the rest of its collection. Nothing here is stored in an index: it measures what
-such a channel would buy before it is built.
+SHREC 2007's pairs is the marginals' (so that the channel weighs what it weighs today), every
+mesh a query against the rest of its collection. Nothing here is stored in an index: it
+measures what such a channel would buy before it is built.
 """
 
 from __future__ import annotations
