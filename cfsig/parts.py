@@ -89,13 +89,13 @@ def partial_vectors(mesh: Mesh, params: Params) -> np.ndarray:
     SolverError
         A curvature diffusion failed.
     """
-    curvature_columns(params)
-    assert params.version is not None  # checked by curvature_columns
+    curvatures = share_curvatures(mesh, params)
+    assert params.version is not None  # checked by share_curvatures
     design = DESIGNS[params.version]
     return np.array(
         [
             weigh_curvature(curvature_histograms(values, areas, design.bins), design)
-            for values, areas in share_curvatures(mesh, params)
+            for values, areas in curvatures
         ]
     )
 
