@@ -127,6 +127,7 @@ DESCRIPTORS = {
     "cfhks 6": Params(descriptor="cfhks", version=6),
     "cfhks 7": Params(descriptor="cfhks", version=7),
     "cfhks 8": Params(descriptor="cfhks", version=8),
+    "cfhks 9": Params(descriptor="cfhks", version=9),
 }
 NAMES = (*DESCRIPTORS, "ShapeDNA")
 V2 = cfhks.DESIGNS[2]
@@ -399,25 +400,35 @@ def study3(args: argparse.Namespace) -> None:
 
 
 def divisor(args: argparse.Namespace) -> None:
-    """A version's curvature divisor by version 3's rule, on version 3's training collections:
-    the curvature channel weighs as much as the rest of the vector, its median L1 distance over
-    the pairs (averaged over the collections) made equal to the rest's. The cached vectors'
-    own divisor cancels out, so the cache may be measured before or after it is set."""
+    """A version's curvature divisor, on version 3's training collections, by its rule.
+
+    Versions 3 to 6 (version 3's rule): the curvature channel weighs as much as the rest of the
+    vector, its median L1 distance over the pairs (averaged over the collections) made equal to
+    the rest's. Version 7 and later (version 7's rule, weight 1): the channel's own median L1
+    distance over the pairs, averaged over its histograms and over the collections, is its
+    distance's unit. The cached vectors' own divisor cancels out, so the cache may be measured
+    before or after it is set."""
     data = _load(args.cache)
     design = cfhks.DESIGNS[args.version]
     head = cfhks.channel_columns(design)["curvature"].start
+    count, width = cfhks.curvature_shape(design)
     curvature, rest = [], []
     for name in V3_CHOSEN_ON:
         vectors = data[name][f"cfhks {args.version}"]
         # back to the unweighted histograms, whose L1 the divisor scales
-        raw = vectors[:, head:] * design.bins * design.curvature
+        raw = vectors[:, head:] * width * design.curvature
         curvature.append(_median(_pairwise(raw)) * raw.shape[1])
         rest.append(_median(_pairwise(vectors[:, :head])) * head)
-    value = np.mean(curvature) / (design.bins * np.mean(rest))
+    if args.version >= 7:
+        value = np.mean(curvature) / width
+        rule = "version 7's: the channel's median"
+    else:
+        value = np.mean(curvature) / (width * np.mean(rest))
+        rule = "version 3's: the channel weighs as the rest"
     print(f"Median L1 over the pairs of {' and '.join(V3_CHOSEN_ON)}: curvature histograms ")
-    print(f"{', '.join(f'{c:.4f}' for c in curvature)}; the rest of the vector ")
-    print(f"{', '.join(f'{r:.4f}' for r in rest)}. Version {args.version}'s curvature divisor: ")
-    print(f"{value:.6f} (set: {design.curvature}, for {design.bins} bins)")
+    print(f"{', '.join(f'{c:.4f}' for c in curvature)} (all {count}); the rest of the vector ")
+    print(f"{', '.join(f'{r:.4f}' for r in rest)}. Version {args.version}'s curvature divisor ")
+    print(f"by {rule}: {value:.6f} (set: {design.curvature}, for {width} bins)")
 
 
 def _tolerance_one(path: Path) -> dict:
@@ -1227,7 +1238,7 @@ def main() -> None:
     )
     parser.add_argument("--rounds", type=int, default=3, help="cost: rounds of timings")
     parser.add_argument(
-        "--version", type=int, default=6, help="divisor: cfhks version, 3 to 6 (7, 8: study7, 8)"
+        "--version", type=int, default=9, help="divisor: cfhks version, 3 and later"
     )
     parser.add_argument(
         "--faces", type=int, nargs="+", default=[2000, 4000, 8000], help="coarse: copies' faces"

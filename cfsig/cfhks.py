@@ -15,8 +15,9 @@ was chosen):
   1-Wasserstein distance per time.
 - ``curvature``: for each scale ``s`` of the version's ``scales``, the area-weighted histogram
   of the angle defect smoothed by heat diffusion for ``s * area`` (`cfsig.curvature`) on the
-  mesh (version 7: on its simplified copy), on ``asinh(value / 10)`` in the version's
-  ``bins``; L1 distance per scale. It needs no eigenproblem, only conjugate gradients.
+  mesh (from version 7: on its simplified copy), on ``asinh(value / 10)`` in the version's
+  ``bins`` (from version 9: the joint histograms of adjacent scales, near their diagonal);
+  L1 distance per histogram. It needs no eigenproblem, only conjugate gradients.
 
 The distance between two meshes is the sum over channels of the channel's distance divided by
 a constant of the version (`Design`): a median of that distance over the pairs of unlabelled
@@ -41,6 +42,8 @@ Versions (`Params.version`; an index stores its own, and a query recomputes with
    eigenpairs (the heat from all 60) and the curvature at 0.00025 to 0.016 (quadrupling),
    scales at which vertex noise no longer moves it; divisors from SHREC 2007's and FAUST's pairs.
 8. Version 7 with 45 eigenpairs, at three quarters of its eigenproblem's cost.
+9. Version 8 with the curvature channel as joint histograms of adjacent scales, near their
+   diagonal: what a part keeps of its whole, for partial queries (`cfsig.parts`).
 
 Only version 1's vector holds phi, so only version 1 solves for it (`solves_phi`); the others
 factorise the Laplacian of the mesh, or of its copy, for the spectrum alone.
@@ -84,12 +87,15 @@ class Design:
         Diffusion times of the curvature channel divided by the surface area; empty leaves the
         channel out.
     curvature : float
-        Divisor of each scale's curvature distance.
+        Divisor of each curvature histogram's distance.
     coarse : int
         Faces of the simplified copy on which the spectrum and heat are computed; 0 computes
         them on the mesh itself.
     bins : int
-        Bins of each curvature histogram.
+        Bins of each curvature histogram, or of each axis of the joint ones.
+    band : int or None
+        Make the curvature channel the joint histograms of adjacent scales within this many
+        bins of the diagonal (`curvature_histograms`); None: a histogram per scale.
     tolerance : float
         Relative residual of the curvature's conjugate gradients.
     predict : bool
@@ -113,6 +119,7 @@ class Design:
     predict: bool = False
     eigenpairs: int = EIGENPAIRS
     curvature_on_copy: bool = False
+    band: int | None = None
 
     @property
     def length(self) -> int:
@@ -178,6 +185,14 @@ DESIGNS[8] = replace(
     heat=(63.188313 / QUANTILES,) * len(_V2_TIMES),
     eigenpairs=45,
 )
+# Version 9: version 8 with the curvature channel as the joint histograms of adjacent scales
+# within `band` bins of the diagonal, on an odd number of bins per axis so that zero curvature
+# lies mid-bin (version 5's reason), chosen for partial queries by `python
+# benchmarks/partial_joint.py` (docs/partial.md, "Joint histograms of adjacent scales";
+# docs/method.md, section 17). Its divisor by version 7's rule, the channel's median distance
+# over SHREC 2007's and FAUST's pairs averaged over its histograms, per entry as `weigh`
+# divides: `python benchmarks/descriptors.py divisor --version 9`.
+DESIGNS[9] = replace(DESIGNS[8], bins=17, band=2, curvature=0.023645)
 
 
 def weighted_quantiles(values: np.ndarray, weights: np.ndarray, count: int) -> np.ndarray:
@@ -204,8 +219,17 @@ def weighted_quantiles(values: np.ndarray, weights: np.ndarray, count: int) -> n
     return values[order][picked]
 
 
-def curvature_histograms(values: np.ndarray, weights: np.ndarray, bins: int) -> np.ndarray:
+def curvature_histograms(
+    values: np.ndarray, weights: np.ndarray, bins: int, band: int | None = None
+) -> np.ndarray:
     """Histograms of curvature at scales, the ``curvature`` channel.
+
+    Each vertex falls in the bin of ``asinh(value / CURVATURE_UNIT)`` on [-CURVATURE_RANGE,
+    CURVATURE_RANGE], values beyond in the end bins. Without ``band``, one histogram per scale;
+    with it, one joint histogram per pair of adjacent scales: where a vertex's curvature lies at
+    one scale and at the next, which the per-scale histograms forget, the second scale's bin
+    taken relative to the first's and clipped to within ``band`` bins of it, where nearly all
+    the mass lies (docs/partial.md, "Joint histograms of adjacent scales").
 
     Parameters
     ----------
@@ -214,20 +238,47 @@ def curvature_histograms(values: np.ndarray, weights: np.ndarray, bins: int) -> 
     weights : (n,) float64
         Non-negative vertex weights (areas) with a positive sum.
     bins : int
-        Bins per histogram (`Design.bins`).
+        Bins per histogram, or per axis of the joint ones (`Design.bins`).
+    band : int or None
+        Bins either side of the diagonal kept in the joint histograms (`Design.band`); None
+        gives the per-scale histograms.
 
     Returns
     -------
-    histograms : (k, bins) float64
-        Per scale, the fraction of the weight in each bin of ``asinh(value / CURVATURE_UNIT)``
-        on [-CURVATURE_RANGE, CURVATURE_RANGE], values beyond counted in the end bins.
+    histograms : (k, bins) or (k - 1, bins * (2 * band + 1)) float64
+        Each the fractions of the weight in its bins: per scale, or with ``band`` per pair of
+        adjacent scales, the first scale's bin major.
     """
     position = np.arcsinh(values / CURVATURE_UNIT) + CURVATURE_RANGE
     position *= bins / (2 * CURVATURE_RANGE)
     index = np.clip(position, 0, bins - 1).astype(np.intp)
+    width = bins
+    if band is not None:
+        width = bins * (2 * band + 1)
+        first, second = index[:, :-1], index[:, 1:]
+        index = first * (2 * band + 1) + np.clip(second - first, -band, band) + band
     fractions = weights / weights.sum()
-    counts = [np.bincount(b, weights=fractions, minlength=bins) for b in index.T]
-    return np.array(counts).reshape(values.shape[1], bins)
+    counts = [np.bincount(b, weights=fractions, minlength=width) for b in index.T]
+    return np.array(counts).reshape(index.shape[1], width)
+
+
+def curvature_shape(design: Design) -> tuple[int, int]:
+    """The shape of a version's `curvature_histograms`.
+
+    Parameters
+    ----------
+    design : Design
+        A version's constants.
+
+    Returns
+    -------
+    shape : (int, int)
+        Histograms, and bins in each: ``(len(scales), bins)``, or with a band
+        ``(len(scales) - 1, bins * (2 * band + 1))``; ``(0, bins)`` without scales.
+    """
+    if design.band is None or not design.scales:
+        return len(design.scales), design.bins
+    return len(design.scales) - 1, design.bins * (2 * design.band + 1)
 
 
 def channels(
@@ -253,7 +304,7 @@ def channels(
     channels : dict
         ``"spectrum"``: (design.eigenpairs,) ``log(lambda_i * area)``; a mesh with fewer nonzero
         eigenvalues repeats its largest. ``"heat"``: (len(times), QUANTILES) quantiles of
-        ``log(area * h_t)``. ``"curvature"``: (len(scales), bins) `curvature_histograms`.
+        ``log(area * h_t)``. ``"curvature"``: `curvature_histograms` of `curvature_shape`.
         ``"phi"``: (QUANTILES,) quantiles of phi, dimensionless, when ``phi`` is given.
 
     Raises
@@ -272,7 +323,7 @@ def channels(
     parts = {
         "spectrum": scaled,
         "heat": heat,
-        "curvature": curvature_histograms(curvature, weights, design.bins),
+        "curvature": curvature_histograms(curvature, weights, design.bins, design.band),
     }
     if phi is not None:
         parts["phi"] = weighted_quantiles(phi, weights, QUANTILES)
@@ -386,7 +437,7 @@ def channel_columns(design: Design) -> dict[str, slice]:
         "phi": 0 if design.phi is None else QUANTILES,
         "spectrum": design.eigenpairs,
         "heat": QUANTILES * len(design.times),
-        "curvature": design.bins * len(design.scales),
+        "curvature": int(np.prod(curvature_shape(design))),
     }
     if design.phi is None:
         del sizes["phi"]
@@ -402,17 +453,17 @@ def weigh_curvature(histograms: np.ndarray, design: Design) -> np.ndarray:
 
     Parameters
     ----------
-    histograms : (len(design.scales), design.bins) float64
-        `curvature_histograms`.
+    histograms : (rows, width) float64
+        `curvature_histograms` of the design, of `curvature_shape`.
     design : Design
         The version's divisors.
 
     Returns
     -------
-    entries : (len(design.scales) * design.bins,) float64
-        Each histogram entry divided by ``design.bins * design.curvature``, scale by scale.
+    entries : (rows * width,) float64
+        Each histogram entry divided by ``width * design.curvature``, histogram by histogram.
     """
-    return (histograms / (design.bins * design.curvature)).ravel()
+    return (histograms / (histograms.shape[1] * design.curvature)).ravel()
 
 
 def cfhks_vector(

@@ -7,7 +7,7 @@ from dataclasses import asdict, dataclass, fields, replace
 
 DESCRIPTORS = ("cf", "cfhks")
 # The versions of each descriptor, the last one the default (docs/descriptors.md).
-VERSIONS = {"cf": (1,), "cfhks": (1, 2, 3, 4, 5, 6, 7, 8)}
+VERSIONS = {"cf": (1,), "cfhks": (1, 2, 3, 4, 5, 6, 7, 8, 9)}
 REPAIR_MODES = ("auto", "off", "proxy")
 # The length of the cfhks vector per version, `cfsig.cfhks.DESIGNS[version].length`
 # (tests/test_cfhks.py checks that the two agree), here so that an index needs no SciPy.
@@ -20,10 +20,11 @@ CFHKS_LENGTHS = {
     6: 30 + 64 * 8 + 49 * 4,
     7: 60 + 64 * 8 + 49 * 4,
     8: 45 + 64 * 8 + 49 * 4,
+    9: 45 + 64 * 8 + 3 * 17 * 5,
 }
 # The width of its curvature channel, the vector's last columns (`cfsig.cfhks.channel_columns`),
 # for the versions that have one.
-CFHKS_CURVATURE = {3: 48 * 4, 4: 48 * 4, 5: 49 * 4, 6: 49 * 4, 7: 49 * 4, 8: 49 * 4}
+CFHKS_CURVATURE = {3: 48 * 4, 4: 48 * 4, 5: 49 * 4, 6: 49 * 4, 7: 49 * 4, 8: 49 * 4, 9: 3 * 17 * 5}
 SOLVERS = ("auto", "cholmod", "eigen", "scipy")  # sparse solver backends (`cfsig.conformal`)
 
 
@@ -40,8 +41,9 @@ class Params:
         What the signature is (one of `DESCRIPTORS`; docs/descriptors.md): ``"cf"``, the
         paper's histogram of phi, to which every other attribute applies; ``"cfhks"``, the
         low Laplace-Beltrami spectrum and heat kernel signatures (version 1 also the quantiles
-        of phi, version 3 also the curvature at four scales), whose constants are fixed per
-        version in `cfsig.cfhks` and which uses only ``mollify`` and ``repair`` of the others.
+        of phi, version 3 and later also the curvature at four scales), whose constants are
+        fixed per version in `cfsig.cfhks` and which uses only ``mollify`` and ``repair`` of
+        the others.
     bins : int
         Number of histogram bins (paper section 2.3: 200).
     low, high : float

@@ -50,7 +50,7 @@ def curvature_columns(params: Params) -> slice:
     Returns
     -------
     columns : slice
-        The last ``bins * len(scales)`` columns of the version's design.
+        The last columns, of the size of the version's `cfsig.cfhks.curvature_shape`.
 
     Raises
     ------
@@ -79,7 +79,7 @@ def partial_vectors(mesh: Mesh, params: Params) -> np.ndarray:
 
     Returns
     -------
-    vectors : (len(SHARES), bins * len(scales)) float64
+    vectors : (len(SHARES), columns) float64
         Comparable by L1 with the `curvature_columns` of the index's signatures.
 
     Raises
@@ -94,7 +94,7 @@ def partial_vectors(mesh: Mesh, params: Params) -> np.ndarray:
     design = DESIGNS[params.version]
     return np.array(
         [
-            weigh_curvature(curvature_histograms(values, areas, design.bins), design)
+            weigh_curvature(curvature_histograms(values, areas, design.bins, design.band), design)
             for values, areas in curvatures
         ]
     )

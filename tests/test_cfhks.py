@@ -52,7 +52,7 @@ def test_length_and_channels(version):
         cf.operators, cfhks.spectrum_of(cf.operators, count=design.eigenpairs)[0], design, cf.phi
     )
     assert parts["phi"].shape == (cfhks.QUANTILES,)
-    assert parts["curvature"].shape == (len(design.scales), design.bins)
+    assert parts["curvature"].shape == cfhks.curvature_shape(design)
     assert np.allclose(parts["curvature"].sum(axis=1), 1.0)
     assert parts["spectrum"].shape == (design.eigenpairs,)
     assert parts["heat"].shape == (len(design.times), cfhks.QUANTILES)
@@ -339,7 +339,7 @@ def test_channel_columns_are_where_weigh_puts_each_channel(version):
         "phi": np.full(cfhks.QUANTILES, 1.0),
         "spectrum": np.full(design.eigenpairs, 2.0),
         "heat": np.full((len(design.times), cfhks.QUANTILES), 3.0),
-        "curvature": np.full((len(design.scales), design.bins), 4.0),
+        "curvature": np.full(cfhks.curvature_shape(design), 4.0),
     }
     vector = cfhks.weigh(parts, design)
     columns = cfhks.channel_columns(design)

@@ -58,6 +58,30 @@ def test_histograms_weigh_by_area(bins):
     assert cfhks.curvature_histograms(np.empty((3, 0)), np.ones(3), bins).shape == (0, bins)
 
 
+def test_joint_histograms_of_adjacent_scales():
+    """Version 9's channel: each pair of adjacent scales binned jointly, near the diagonal."""
+    rng = np.random.default_rng(3)
+    values = np.cumsum(rng.normal(0.0, 20.0, (500, 4)), axis=1)  # adjacent scales close
+    weights = rng.uniform(0.5, 2.0, 500)
+    bins, band = 15, 2
+    joint = cfhks.curvature_histograms(values, weights, bins, band)
+    assert joint.shape == (3, bins * (2 * band + 1))
+    assert np.allclose(joint.sum(axis=1), 1.0) and np.all(joint >= 0)
+    # summed over the second scale, each pair is the first scale's own histogram
+    marginal = cfhks.curvature_histograms(values, weights, bins)
+    assert np.allclose(joint.reshape(3, bins, -1).sum(axis=2), marginal[:3])
+    # two surfaces whose per-scale histograms agree, whose curvature moves unlike across scales
+    apart = np.array([[0.0, 0.0], [1e3, 1e3]])
+    crossed = np.array([[0.0, 1e3], [1e3, 0.0]])
+    same = [cfhks.curvature_histograms(v, np.ones(2), bins) for v in (apart, crossed)]
+    assert np.array_equal(*same)
+    joints = [cfhks.curvature_histograms(v, np.ones(2), bins, band) for v in (apart, crossed)]
+    assert not np.array_equal(*joints)
+    # beyond the band, the second scale's bin is clipped to its edge
+    far = cfhks.curvature_histograms(np.array([[0.0, 1e6]]), np.ones(1), bins, band)
+    assert far[0, (bins // 2) * (2 * band + 1) + 2 * band] == 1.0
+
+
 def test_zero_curvature_falls_in_one_bin_whatever_the_round_off():
     """Flat parts: version 4's bin edge at zero splits them by the sign of their round-off,
     version 5's 49 bins keep them in the middle one."""

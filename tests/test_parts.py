@@ -49,17 +49,17 @@ def test_only_the_curvature_channel_takes_partial_queries():
     columns = curvature_columns(CFHKS)
     design = cfhks.DESIGNS[CFHKS.version]
     assert columns.stop == design.length == signature_length(CFHKS)
-    assert columns.stop - columns.start == len(design.scales) * design.bins
+    assert columns.stop - columns.start == np.prod(cfhks.curvature_shape(design))
     for params in (Params(), Params(descriptor="cfhks", version=2)):
         with pytest.raises(PartialError, match="rebuild it"):
             curvature_columns(params)
 
 
-@pytest.mark.parametrize(("version", "levels"), [(5, 3), (6, 3), (7, 3), (7, 4)])
+@pytest.mark.parametrize(("version", "levels"), [(5, 3), (6, 3), (7, 3), (7, 4), (9, 3), (9, 4)])
 def test_a_whole_as_its_own_part_matches_its_signature(version, levels):
     """Up to the curvature's conjugate gradients, which start from other guesses here: to 1e-5
-    (version 5) the two agree to allclose's tolerance; to 1e-3 (versions 6 and 7) within 5% of
-    the distance to another shape. Version 7 measures a whole of more than 4000 faces (levels
+    (version 5) the two agree to allclose's tolerance; to 1e-3 (versions 6, 7 and 9) within 5% of
+    the distance to another shape. Versions 7 and 9 measure a whole of more than 4000 faces (levels
     4) on its simplified copy, and its part on the same copy: each share is solved alone, from
     the same guesses as the whole, so the two agree."""
     params = Params(descriptor="cfhks", version=version)
@@ -80,7 +80,7 @@ def test_share_curvatures_are_what_partial_vectors_histogram():
     design = cfhks.DESIGNS[CFHKS.version]
     ((values, areas),) = share_curvatures(mesh, CFHKS, (SHARES[2],))
     assert values.shape == (len(areas), len(design.scales)) and np.all(areas > 0)
-    histograms = cfhks.curvature_histograms(values, areas, design.bins)
+    histograms = cfhks.curvature_histograms(values, areas, design.bins, design.band)
     assert np.array_equal(
         cfhks.weigh_curvature(histograms, design), partial_vectors(mesh, CFHKS)[2]
     )
