@@ -189,7 +189,7 @@ DESIGNS[8] = replace(
 # within `band` bins of the diagonal, on an odd number of bins per axis so that zero curvature
 # lies mid-bin (version 5's reason), chosen for partial queries by `python
 # benchmarks/partial_joint.py` (docs/partial.md, "Joint histograms of adjacent scales";
-# docs/method.md, section 17). Its divisor by version 7's rule, the channel's median distance
+# docs/method.md, section 18). Its divisor by version 7's rule, the channel's median distance
 # over SHREC 2007's and FAUST's pairs averaged over its histograms, per entry as `weigh`
 # divides: `python benchmarks/descriptors.py divisor --version 9`.
 DESIGNS[9] = replace(DESIGNS[8], bins=17, band=2, curvature=0.023645)

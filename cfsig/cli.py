@@ -379,8 +379,9 @@ def query(index_file, meshes, k, solver, as_json, png, partial) -> None:
     """Find the k indexed meshes nearest to each query mesh (L1 distance).
 
     The query signatures are computed with the index's own parameters. With --partial the
-    first result is the whole whose curvature at small scales matches the part's best (the
-    text output gives its partial distance, 0 to 3, after the query's name), the others the
+    first result is the whole whose curvature at small scales matches the part's best (its
+    partial distance, 0 to 3, follows the query's name in the text output and is the first
+    result's "partial_distance" in the JSON), the others the
     meshes nearest to that whole, with their distances to it (docs/method.md); it needs an
     index of cfhks version 3 or later. In the --png picture a query whose folder
     name is a class of the index has its results framed green (same class) or orange.
@@ -425,6 +426,9 @@ def query(index_file, meshes, k, solver, as_json, png, partial) -> None:
             ]
             for hits in results
         ]
+        for rows, fit in zip(lists, fits, strict=False):  # fits: none without --partial
+            if rows:
+                rows[0]["partial_distance"] = fit
         click.echo(json.dumps(lists[0] if len(lists) == 1 else lists, indent=2))
         return
     for i, (path, hits) in enumerate(zip(meshes, results, strict=True)):

@@ -132,6 +132,8 @@ def test_query_partial_finds_the_whole(wholes):
         with IndexReader(index) as reader:
             fit = partial_search(reader, partial_file(part, reader.params), 3)[1]
         assert text.splitlines()[0] == f"# {part}  (partial distance {fit:.4f})" and fit > 0
+        assert hits[0]["partial_distance"] == fit
+        assert all("partial_distance" not in h for h in hits[1:])
 
 
 def test_partial_scores_are_the_unexplained_share_plus_the_distance():
