@@ -42,12 +42,13 @@ os.environ.update(
 
 import argparse
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 from partial import COLLECTIONS, KINDS, cut, holes, scan
 
-from cfsig.cfhks import DESIGNS, curvature_histograms, weigh_curvature
+from cfsig.cfhks import DESIGNS, curvature_histograms, curvature_shape, weigh_curvature
 from cfsig.measures import evaluate_distances, evaluate_queries
 from cfsig.mesh import read_mesh
 from cfsig.nearest import l1_distances
@@ -91,14 +92,13 @@ def _features(curvatures: list[tuple[np.ndarray, np.ndarray]]) -> dict[str, np.n
 
 def _columns(name: str) -> int:
     """The columns a row of a feature takes (`measure`'s names)."""
-    pairs = len(DESIGN.scales) - 1
     match name.split():
         case ["marginal"]:
-            return len(DESIGN.scales) * DESIGN.bins
+            return int(np.prod(curvature_shape(DESIGN)))
         case ["joint", b]:
-            return pairs * int(b) ** 2
+            return (len(DESIGN.scales) - 1) * int(b) ** 2
         case ["band", b, d]:
-            return pairs * int(b) * (2 * int(d) + 1)
+            return int(np.prod(curvature_shape(replace(DESIGN, bins=int(b), band=int(d)))))
         case ["both", b]:
             return _columns("marginal") + _columns(f"joint {b}")
     raise ValueError(name)

@@ -274,9 +274,9 @@ def curvature_shape(design: Design) -> tuple[int, int]:
     -------
     shape : (int, int)
         Histograms, and bins in each: ``(len(scales), bins)``, or with a band
-        ``(len(scales) - 1, bins * (2 * band + 1))``; ``(0, bins)`` without scales.
+        ``(len(scales) - 1, bins * (2 * band + 1))``.
     """
-    if design.band is None or not design.scales:
+    if design.band is None:
         return len(design.scales), design.bins
     return len(design.scales) - 1, design.bins * (2 * design.band + 1)
 
