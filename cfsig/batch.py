@@ -10,6 +10,7 @@ from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
+from functools import partial
 from itertools import islice
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -20,6 +21,7 @@ from .params import Params
 
 if TYPE_CHECKING:  # neither HDF5 in the workers, nor SciPy in the process that writes the index
     from .index import IndexWriter
+    from .isolate import Limits
     from .signature import Signature
 
 _CONNECT_TIMEOUT = "20s"
@@ -60,6 +62,7 @@ def compute_many(
     jobs: int | None = None,
     scheduler: str | None = None,
     compute: Compute | None = None,
+    limits: Limits | None = None,
 ) -> Iterator[Outcome]:
     """Signatures of many files in worker processes, yielded as they finish.
 
@@ -89,6 +92,9 @@ def compute_many(
     compute : callable, optional
         ``compute(path, params, solver) -> Signature``, a module-level function (it is pickled
         by name); `cfsig.signature.signature_file` unless a caller wraps it.
+    limits : Limits, optional
+        Wall time and memory allowed to each file's proxy remesh, when ``compute`` is the
+        default (`cfsig.signature.compute_signature`).
 
     Yields
     ------
@@ -102,7 +108,7 @@ def compute_many(
     ClusterError
         The scheduler cannot be reached.
     """
-    compute = compute or _signature_file()
+    compute = compute or _signature_file(limits)
     if scheduler is not None:
         yield from _compute_on_cluster(paths, params, solver, scheduler, compute)
         return
@@ -141,6 +147,7 @@ def index_meshes(
     strict: bool = False,
     commit_every: int = 200,
     progress: Progress | None = None,
+    limits: Limits | None = None,
 ) -> tuple[int, list[str]]:
     """Compute the new and changed meshes under some files and folders and add them to an index.
 
@@ -171,6 +178,8 @@ def index_meshes(
         ``progress(outcomes, total)`` wraps the iterator of `Outcome` (in completion order) and
         yields the same outcomes, e.g. to show a progress bar; ``total()`` is the number of
         files to compute found so far.
+    limits : Limits, optional
+        As `compute_many`.
 
     Returns
     -------
@@ -209,7 +218,7 @@ def index_meshes(
                 yield path
 
     added, last_commit = 0, time.monotonic()
-    outcomes = compute_many(todo(), writer.params, solver, jobs, scheduler)
+    outcomes = compute_many(todo(), writer.params, solver, jobs, scheduler, limits=limits)
     for path, signature in successes(outcomes, lambda: found, failures, strict, progress):
         writer.add(Entry(names.pop(path), mesh_label(path), str(path.resolve())), signature)
         added += 1
@@ -336,13 +345,13 @@ def _compute_on_cluster(
             tasks.update(submit(window - len(running)))
 
 
-def _signature_file() -> Compute:
-    """`cfsig.signature.signature_file`, imported when first needed: the process that hands out
-    the files and writes the index computes nothing, and so starts without loading SciPy
-    (docs/performance.md, "Start-up")."""
+def _signature_file(limits: Limits | None) -> Compute:
+    """`cfsig.signature.signature_file` with ``limits``, imported when first needed: the process
+    that hands out the files and writes the index computes nothing, and so starts without
+    loading SciPy (docs/performance.md, "Start-up")."""
     from .signature import signature_file
 
-    return signature_file
+    return signature_file if limits is None else partial(signature_file, limits=limits)
 
 
 def _work_batch(

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any, NoReturn
 import click
 
 from .errors import CfsigError
+from .isolate import Limits
 from .params import DESCRIPTORS, REPAIR_MODES, SOLVERS, Params
 
 if TYPE_CHECKING:  # each command imports what it uses, so that `cfsig --help` starts fast
@@ -71,6 +72,14 @@ _jobs_option = click.option(
     help="Worker processes [all cores].",
 )
 _json_option = click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+_stage_timeout_option = click.option(
+    "--stage-timeout",
+    type=click.FloatRange(min=0, min_open=True),
+    default=Limits().seconds,
+    show_default=True,
+    help="Seconds of wall time allowed to the repair stage's proxy remesh of one mesh; a mesh "
+    "that takes longer fails.",
+)
 
 
 def _count_option(*names: str, default: int, help: str) -> Callable:
@@ -137,6 +146,7 @@ def main() -> None:
 @_with(_params_options)
 @_descriptor_option
 @_solver_option
+@_stage_timeout_option
 @_json_option
 @click.option(
     "--save",
@@ -159,7 +169,19 @@ def main() -> None:
     help="Plot the signature histograms overlaid.",
 )
 def compute(
-    meshes, normalize, seed, bins, repair, descriptor, solver, as_json, save, png, ply, hist
+    meshes,
+    normalize,
+    seed,
+    bins,
+    repair,
+    descriptor,
+    solver,
+    stage_timeout,
+    as_json,
+    save,
+    png,
+    ply,
+    hist,
 ) -> None:
     """Compute the conformal factor and signature of each mesh.
 
@@ -185,7 +207,9 @@ def compute(
     drawn: list = []
     for path in meshes:
         try:
-            mesh, sig = mesh_and_signature(path, params, solver, phi=True)
+            mesh, sig = mesh_and_signature(
+                path, params, solver, phi=True, limits=Limits(stage_timeout)
+            )
         except CfsigError as exc:
             failed.append(str(exc))
             rows.append({"file": str(path), "error": str(exc)})
@@ -262,6 +286,7 @@ def _report_errors(errors: list[str]) -> None:
     "noisy scans (docs/descriptors.md).",
 )  # fmt: skip
 @_solver_option
+@_stage_timeout_option
 @_jobs_option
 @click.option(
     "--scheduler", metavar="ADDRESS",
@@ -284,6 +309,7 @@ def index(
     descriptor,
     version,
     solver,
+    stage_timeout,
     jobs,
     scheduler,
     strict,
@@ -321,8 +347,9 @@ def index(
         with IndexWriter(output, params) as writer:
             bar = partial(_progress, what="indexing", routes=routes)
             added, skipped = index_meshes(
-                writer, paths, solver, jobs, scheduler, strict, commit_every, bar
-            )
+                writer, paths, solver, jobs, scheduler, strict, commit_every, bar,
+                Limits(stage_timeout),
+            )  # fmt: skip
         total = len(writer)  # after the last commit
     except CfsigError as exc:
         _fail(str(exc))
@@ -364,6 +391,7 @@ def _format_routes(routes: Counter[str]) -> str:
 @click.argument("meshes", nargs=-1, required=True, type=_PATH)
 @_count_option("-k", default=20, help="Number of results per query.")
 @_solver_option
+@_stage_timeout_option
 @_json_option
 @click.option(
     "--png",
@@ -375,7 +403,7 @@ def _format_routes(routes: Counter[str]) -> str:
     is_flag=True,
     help="Each query is a part of a shape (a cut, a scan, holes): find the wholes it belongs to.",
 )
-def query(index_file, meshes, k, solver, as_json, png, partial) -> None:
+def query(index_file, meshes, k, solver, stage_timeout, as_json, png, partial) -> None:
     """Find the k indexed meshes nearest to each query mesh (L1 distance).
 
     The query signatures are computed with the index's own parameters. With --partial the
@@ -406,7 +434,8 @@ def query(index_file, meshes, k, solver, as_json, png, partial) -> None:
                 found = [partial_search(reader, partial_file(p, reader.params), k) for p in meshes]
                 results, fits = [hits for hits, _ in found], [fit for _, fit in found]
             else:
-                sigs = [signature_file(path, reader.params, solver).vector for path in meshes]
+                limits = Limits(stage_timeout)
+                sigs = [signature_file(p, reader.params, solver, limits).vector for p in meshes]
                 results = search(reader, np.array(sigs), k)
             classes = set(reader.column("labels")) if png else set()
     except CfsigError as exc:
@@ -458,6 +487,7 @@ def query(index_file, meshes, k, solver, as_json, png, partial) -> None:
 )
 @_with(_params_options)
 @_solver_option
+@_stage_timeout_option
 @_jobs_option
 @click.option("--strict", is_flag=True, help="Stop at the first file that fails.")
 @_json_option
@@ -489,6 +519,7 @@ def evaluate(
     bins,
     repair,
     solver,
+    stage_timeout,
     jobs,
     strict,
     as_json,
@@ -546,7 +577,7 @@ def evaluate(
                 )
                 counted = routes if not collections else Counter()
                 collections[name] = _compute_folder(
-                    folder, params, solver, jobs, strict, skipped, counted
+                    folder, params, solver, jobs, strict, skipped, counted, Limits(stage_timeout)
                 )
     except CfsigError as exc:
         _fail(str(exc))
@@ -619,12 +650,13 @@ def _compute_folder(
     strict: bool,
     skipped: list[str],
     routes: Counter[str],
+    limits: Limits,
 ) -> Collection:
     """A folder's collection under a progress bar; failures go to ``skipped``, exit if none."""
     from .evaluate import compute_collection
 
     bar = partial(_progress, what=f"computing {params.descriptor}", routes=routes)
-    collection, failures = compute_collection(folder, params, solver, jobs, strict, bar)
+    collection, failures = compute_collection(folder, params, solver, jobs, strict, bar, limits)
     skipped += failures
     if not len(collection) or (strict and failures):
         _report_skipped(skipped, strict)

@@ -21,6 +21,7 @@ from .cla import labels_from_cla
 from .errors import MeshError
 from .files import find_meshes, mesh_label
 from .index import IndexReader
+from .isolate import Limits
 from .measures import RetrievalReport, evaluate_distances, evaluate_queries
 from .nearest import l1_distances
 from .params import Params, signature_length
@@ -130,6 +131,7 @@ def compute_collection(
     jobs: int | None = None,
     strict: bool = False,
     progress: Progress | None = None,
+    limits: Limits | None = None,
 ) -> tuple[Collection, list[str]]:
     """Compute the signatures of all mesh files in a folder, each subfolder a class.
 
@@ -154,6 +156,8 @@ def compute_collection(
     progress : callable, optional
         ``progress(outcomes, total)`` wraps the iterator of `cfsig.batch.Outcome` (``total``
         files, in completion order) and yields the same outcomes, e.g. to show a progress bar.
+    limits : Limits, optional
+        Wall time and memory allowed to each file's proxy remesh (`cfsig.batch.compute_many`).
 
     Returns
     -------
@@ -173,7 +177,7 @@ def compute_collection(
     if not found:
         raise MeshError(f"{folder}: no mesh files")
     failures: list[str] = []
-    outcomes = compute_many(found, params, solver, jobs)
+    outcomes = compute_many(found, params, solver, jobs, limits=limits)
     signatures = dict(successes(outcomes, lambda: len(found), failures, strict, progress))
     order = [path for path in found if path in signatures]
     names = tuple(found[path] for path in order)

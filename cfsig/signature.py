@@ -18,6 +18,7 @@ import numpy as np
 from .cfhks import cfhks_vector, copy_vector, solves_phi
 from .conformal import ConformalFactor, Operators, conformal_factor, mesh_components, operators
 from .errors import MeshError, SolverError
+from .isolate import Limits
 from .mesh import Mesh, parse_mesh, read_bytes
 from .params import Params
 from .repair import repair_mesh
@@ -207,7 +208,11 @@ def signature_of(
 
 
 def compute_signature(
-    mesh: Mesh, params: Params, solver: str = "auto", phi: bool = False
+    mesh: Mesh,
+    params: Params,
+    solver: str = "auto",
+    phi: bool = False,
+    limits: Limits | None = None,
 ) -> Signature:
     """Repair, conformal factor and signature of an in-memory mesh.
 
@@ -222,6 +227,8 @@ def compute_signature(
         Sparse solver backend.
     phi : bool
         Solve for the conformal factor even when the descriptor does not need it.
+    limits : Limits, optional
+        Wall time and memory allowed to the repair stage's proxy remesh (default `Limits()`).
 
     Returns
     -------
@@ -234,13 +241,15 @@ def compute_signature(
     SolverError, MissingDependencyError
         As `conformal_factor` and `signature_of`.
     """
-    return _repair_and_sign(mesh, params, solver, phi)[1]
+    return _repair_and_sign(mesh, params, solver, phi, limits)[1]
 
 
-def _repair_and_sign(mesh: Mesh, params: Params, solver: str, phi: bool) -> tuple[Mesh, Signature]:
+def _repair_and_sign(
+    mesh: Mesh, params: Params, solver: str, phi: bool, limits: Limits | None
+) -> tuple[Mesh, Signature]:
     """`compute_signature`, also returning the repaired mesh that phi lives on."""
     start = time.perf_counter()
-    mesh = repair_mesh(mesh, params.repair)
+    mesh = repair_mesh(mesh, params.repair, limits)
     cf = conformal_factor(mesh, params.mollify, solver) if phi or needs_phi(params) else None
     ops, vector, repairs = None, None, mesh.repairs
     if cf is None and params.descriptor == "cfhks":
@@ -264,7 +273,9 @@ def _repair_and_sign(mesh: Mesh, params: Params, solver: str, phi: bool) -> tupl
     )
 
 
-def signature_file(path: str | os.PathLike, params: Params, solver: str = "auto") -> Signature:
+def signature_file(
+    path: str | os.PathLike, params: Params, solver: str = "auto", limits: Limits | None = None
+) -> Signature:
     """Read a mesh file and compute its signature.
 
     Parameters
@@ -275,6 +286,8 @@ def signature_file(path: str | os.PathLike, params: Params, solver: str = "auto"
         Signature parameters.
     solver : {"auto", "cholmod", "eigen", "scipy"}
         Sparse solver backend.
+    limits : Limits, optional
+        As `compute_signature`.
 
     Returns
     -------
@@ -286,11 +299,15 @@ def signature_file(path: str | os.PathLike, params: Params, solver: str = "auto"
     MeshError
         The file cannot be read or gives no finite signature; the message names the file.
     """
-    return mesh_and_signature(path, params, solver)[1]
+    return mesh_and_signature(path, params, solver, limits=limits)[1]
 
 
 def mesh_and_signature(
-    path: str | os.PathLike, params: Params, solver: str = "auto", phi: bool = False
+    path: str | os.PathLike,
+    params: Params,
+    solver: str = "auto",
+    phi: bool = False,
+    limits: Limits | None = None,
 ) -> tuple[Mesh, Signature]:
     """Read a mesh file and compute its signature, keeping the mesh (e.g. to draw phi on it).
 
@@ -304,6 +321,8 @@ def mesh_and_signature(
         Sparse solver backend.
     phi : bool
         Solve for the conformal factor even when the descriptor does not need it.
+    limits : Limits, optional
+        As `compute_signature`.
 
     Returns
     -------
@@ -322,7 +341,7 @@ def mesh_and_signature(
     data = read_bytes(path)
     mesh = parse_mesh(data, path)
     try:
-        mesh, sig = _repair_and_sign(mesh, params, solver, phi)
+        mesh, sig = _repair_and_sign(mesh, params, solver, phi, limits)
     except MeshError as exc:  # its subclasses too (a stage past its limits)
         raise type(exc)(f"{path}: {exc}") from None
     except SolverError as exc:

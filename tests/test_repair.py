@@ -8,8 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cfsig import repair, signature
+from click.testing import CliRunner
+
+from cfsig import repair
 from cfsig.batch import compute_many
+from cfsig.cli import main
 from cfsig.errors import MeshError, StageLimitError
 from cfsig.geometry import mesh_edges
 from cfsig.isolate import Limits
@@ -362,22 +365,12 @@ def test_proxy_past_its_memory_limit(tmp_path):
     assert result.returncode == 1 and "more than 64 MiB" in result.stderr
 
 
-def _tiny_limits(path, params, solver):
-    """`signature_file` with the proxy allowed only a millisecond (a worker of the batch)."""
-    original = signature.repair_mesh
-    signature.repair_mesh = lambda mesh, mode: original(mesh, mode, TINY)
-    try:
-        return signature_file(path, params, solver)
-    finally:
-        signature.repair_mesh = original
-
-
 def test_limit_error_names_the_file(tmp_path):
     path = write_off(tmp_path / "two.off", *_interpenetrating())
     with pytest.raises(StageLimitError) as info:  # the type is kept, the file named
-        _tiny_limits(path, Params(), "auto")
+        signature_file(path, Params(), limits=TINY)
     message = str(info.value)
-    assert message.startswith(f"{path}: ") and "longer than" in message
+    assert message.startswith(f"{path}: ") and "longer than 0.001 s" in message
     assert "\n" not in message
 
 
@@ -386,7 +379,7 @@ def test_batch_goes_on_past_a_limit(tmp_path):
     good = write_off(tmp_path / "sphere.off", *SPHERE)
     outcomes = {
         Path(o.path).name: o
-        for o in compute_many([slow, good], Params(), jobs=1, compute=_tiny_limits)
+        for o in compute_many([slow, good], Params(), jobs=1, limits=TINY)
     }
     assert sorted(outcomes) == ["sphere.off", "two.off"]
     assert outcomes["sphere.off"].error == ""
@@ -396,6 +389,28 @@ def test_batch_goes_on_past_a_limit(tmp_path):
     assert failed.signature is None
     assert failed.error.startswith(f"{slow}: ") and "longer than" in failed.error
     assert "\n" not in failed.error
+
+
+def test_stage_timeout_option_reaches_every_command(tmp_path):
+    folder = tmp_path / "meshes" / "things"
+    folder.mkdir(parents=True)
+    slow = write_off(folder / "two.off", *_interpenetrating())
+    write_off(folder / "sphere.off", *SPHERE)
+    write_off(folder / "torus.off", *torus())
+    index = tmp_path / "index.h5"
+    runner = CliRunner()
+    tiny = ["--stage-timeout", "0.001"]
+    result = runner.invoke(main, ["index", str(tmp_path / "meshes"), "-o", str(index), *tiny])
+    assert result.exit_code == 3  # the clean meshes indexed, the proxy's mesh skipped
+    assert f"{slow}: the proxy remesh took longer than 0.001 s" in result.output
+    assert "2 meshes added" in result.output
+    for command in (["compute", str(slow)], ["query", str(index), str(slow)]):
+        result = runner.invoke(main, [*command, *tiny])
+        assert result.exit_code == 1 and "took longer than 0.001 s" in result.output, command
+    result = runner.invoke(main, ["evaluate", str(tmp_path / "meshes"), "-j", "1", *tiny])
+    assert result.exit_code == 3 and "took longer than 0.001 s" in result.output
+    result = runner.invoke(main, ["compute", str(slow), "--stage-timeout", "0"])
+    assert result.exit_code == 2 and "--stage-timeout" in result.output
 
 
 # -- parameters -------------------------------------------------------------------------------
