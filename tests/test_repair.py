@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from click.testing import CliRunner
 
 from cfsig import repair
@@ -378,8 +377,7 @@ def test_batch_goes_on_past_a_limit(tmp_path):
     slow = write_off(tmp_path / "two.off", *_interpenetrating())
     good = write_off(tmp_path / "sphere.off", *SPHERE)
     outcomes = {
-        Path(o.path).name: o
-        for o in compute_many([slow, good], Params(), jobs=1, limits=TINY)
+        Path(o.path).name: o for o in compute_many([slow, good], Params(), jobs=1, limits=TINY)
     }
     assert sorted(outcomes) == ["sphere.off", "two.off"]
     assert outcomes["sphere.off"].error == ""
