@@ -94,7 +94,7 @@ def compute_many(
         by name); `cfsig.signature.signature_file` unless a caller wraps it.
     limits : Limits, optional
         Wall time and memory allowed to each file's proxy remesh, when ``compute`` is the
-        default (`cfsig.signature.compute_signature`).
+        default (`cfsig.signature.signature_file`).
 
     Yields
     ------
