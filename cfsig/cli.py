@@ -74,6 +74,7 @@ _jobs_option = click.option(
 _json_option = click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 _stage_timeout_option = click.option(
     "--stage-timeout",
+    metavar="SECONDS",
     type=click.FloatRange(min=0, min_open=True),
     default=Limits().seconds,
     show_default=True,
