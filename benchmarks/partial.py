@@ -310,16 +310,15 @@ def _genus_table(data: dict) -> list[str]:
         distances[f"cfhks {DEFAULT.version}, {channel} alone"] = l1_distances(part, part)
     dna = data["ShapeDNA"]
     distances["ShapeDNA (L2)"] = np.linalg.norm(dna[:, None] - dna[None], axis=-1)
-    for title, distance in distances.items():
-        report = evaluate_distances(distance, labels)
+    reports = {title: evaluate_distances(d, labels) for title, d in distances.items()}
+    for title, report in reports.items():
         ft = report.per_query[:, 1]
         lines.append(
             f"| {title} | {ft[outlier].mean():.3f} | {ft[mixed & ~outlier].mean():.3f} | "
             f"{np.mean([ft[c].mean() for c in classmates]):.3f} | "
             f"{report.measures['NN']:.3f} | {report.measures['FT']:.3f} |"
         )
-        if title == f"cfhks {DEFAULT.version}":
-            default_ft = ft
+    default_ft = reports[f"cfhks {DEFAULT.version}"].per_query[:, 1]
     names = [
         f"{data['names'][i]} (chi {chi[i]}, class {common[labels[i]]})"
         for i in np.flatnonzero(outlier)
