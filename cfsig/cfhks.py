@@ -249,9 +249,7 @@ def curvature_histograms(
         Each the fractions of the weight in its bins: per scale, or with ``band`` per pair of
         adjacent scales, the first scale's bin major.
     """
-    position = np.arcsinh(values / CURVATURE_UNIT) + CURVATURE_RANGE
-    position *= bins / (2 * CURVATURE_RANGE)
-    index = np.clip(position, 0, bins - 1).astype(np.intp)
+    index = curvature_bins(values, bins)
     width = bins
     if band is not None:
         width = bins * (2 * band + 1)
@@ -260,6 +258,27 @@ def curvature_histograms(
     fractions = weights / weights.sum()
     counts = [np.bincount(b, weights=fractions, minlength=width) for b in index.T]
     return np.array(counts).reshape(index.shape[1], width)
+
+
+def curvature_bins(values: np.ndarray, bins: int) -> np.ndarray:
+    """The bin of each curvature value on the axis of `curvature_histograms`.
+
+    Parameters
+    ----------
+    values : (n, k) float64
+        Curvature at k scales, dimensionless.
+    bins : int
+        Bins on the axis: ``asinh(value / CURVATURE_UNIT)`` on [-CURVATURE_RANGE,
+        CURVATURE_RANGE], values beyond in the end bins.
+
+    Returns
+    -------
+    bins : (n, k) intp
+        In [0, bins).
+    """
+    position = np.arcsinh(values / CURVATURE_UNIT) + CURVATURE_RANGE
+    position *= bins / (2 * CURVATURE_RANGE)
+    return np.clip(position, 0, bins - 1).astype(np.intp)
 
 
 def curvature_shape(design: Design) -> tuple[int, int]:

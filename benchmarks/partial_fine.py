@@ -1,0 +1,227 @@
+"""Partial queries by the joint histogram of all four curvature scales, on finer bins (partial.md).
+
+    python benchmarks/partial_fine.py --data-root /work/data --doc docs/partial.md
+
+A study, not what ``cfsig query --partial`` computes. Version 9's curvature channel
+(`cfsig.cfhks`) holds the joint histograms of each pair of adjacent scales, 17 bins per axis:
+it forgets where a vertex lies at scales two apart, and a bin is a twelfth of the curvature's
+axis wide. This asks what a part gains when the whole's histogram keeps all four scales at once
+(one cell per vertex's first bin and its three steps to the next scale, each clipped to within
+D bins: B x (2 D + 1)^3 cells), on B bins per axis, B up to 41.
+
+It makes the parts of ``benchmarks/partial.py`` (the same cuts, bodies with holes and scans,
+from the same seeds) of every mesh of SHREC 2007, McGill and FAUST, measures the curvature of
+the wholes and of the parts at each share as version 9 does (`cfsig.parts.share_curvatures`),
+and ranks the wholes for each part by the partial distance (`cfsig.parts.partial_scores`:
+unexplained share plus L1 distance, weight 1, at the best share) of each feature. Such a
+histogram has far more cells than a whole has vertices (about 2,000 on its copy), so it is
+stored sparse: the partial distance needs only, per share ``f``, ``sum(min(f p, w))`` and
+``sum(min(p, w))`` over the part's own cells (`_scores`). Reported per collection and kind: NN
+by the partial distance, and the first tier of the ``--partial`` ranking (the nearest whole
+first, then the others by their version 9 whole-shape distance to it); and per feature the
+median number of cells a whole occupies, which is what an index would store per row.
+
+The ``pairs 17 2`` row is version 9's own channel through the same code, and reproduces the
+``--partial`` rows of partial.md's tables. The best feature is the one with the best mean NN
+over SHREC 2007's three kinds, as version 9's channel and the partial distance's weight were
+chosen; McGill and FAUST are reported, not used.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.update(
+    dict.fromkeys(["OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"], "1")
+)
+
+import argparse
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+from partial import COLLECTIONS, KINDS, cut, holes, scan
+
+from cfsig.cfhks import curvature_bins
+from cfsig.measures import evaluate_queries
+from cfsig.mesh import read_mesh
+from cfsig.nearest import l1_distances
+from cfsig.params import Params
+from cfsig.parts import SHARES, share_curvatures
+from cfsig.repair import repair_mesh
+from cfsig.signature import compute_signature
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT = Params(descriptor="cfhks", version=9)
+# (name, B, D, scales jointly): version 9's adjacent pairs, then all four scales on finer bins;
+# odd B puts zero curvature mid-bin (version 5's reason), D grows with B to cover as much of
+# the axis.
+FEATURES = (
+    ("pairs 17 2", 17, 2, 2),
+    ("four 17 2", 17, 2, 4),
+    ("four 25 3", 25, 3, 4),
+    ("four 33 4", 33, 4, 4),
+    ("four 33 6", 33, 6, 4),
+    ("four 41 5", 41, 5, 4),
+)
+TITLE = "## Four scales jointly, on finer bins: a study"
+
+
+def cells(values: np.ndarray, bins: int, band: int, joint: int) -> np.ndarray:
+    """The cell of each vertex and window of ``joint`` adjacent scales.
+
+    Parameters
+    ----------
+    values : (n, k) float64
+        Curvature at k scales (`cfsig.curvature.smoothed_curvature`), dimensionless.
+    bins, band : int
+        Bins per axis, and the steps from one scale's bin to the next kept (clipped beyond).
+    joint : int
+        Scales per cell: 2 gives version 9's pairs (k - 1 windows), k one cell per vertex.
+
+    Returns
+    -------
+    cells : (n, k - joint + 1) int64
+        Cell numbers, distinct across windows: ``window * cells_per_window + cell``.
+    """
+    index = curvature_bins(values, bins).astype(np.int64)
+    width = 2 * band + 1
+    windows = index.shape[1] - joint + 1
+    out = np.empty((len(index), windows), np.int64)
+    for w in range(windows):
+        cell = index[:, w]
+        for s in range(w + 1, w + joint):
+            cell = cell * width + np.clip(index[:, s] - index[:, s - 1], -band, band) + band
+        out[:, w] = w * bins * width ** (joint - 1) + cell
+    return out
+
+
+def histogram(values: np.ndarray, areas: np.ndarray, feature: tuple) -> tuple:
+    """A surface's sparse histogram of one feature: (cells, fractions), each window summing to
+    1 / windows so that the whole sums to 1 (as `cfsig.parts.partial_scores` takes mass 1)."""
+    _, bins, band, joint = feature
+    found = cells(values, bins, band, joint)
+    weights = np.repeat(areas / areas.sum() / found.shape[1], found.shape[1])
+    unique, where = np.unique(found.ravel(), return_inverse=True)
+    return unique, np.bincount(where, weights=weights)
+
+
+def _one(item: tuple[Path, int]) -> dict:
+    """A whole's version 9 signature and sparse histograms, and its parts' per share."""
+    path, seed = item
+    rng = np.random.default_rng(seed)  # as benchmarks/partial.py draws the parts
+    mesh = read_mesh(path)
+    values, areas = share_curvatures(repair_mesh(mesh), DEFAULT, (1.0,))[0]
+    row = {
+        "default": compute_signature(mesh, DEFAULT).vector,
+        "whole": {f[0]: histogram(values, areas, f) for f in FEATURES},
+    }
+    for kind, make in (("cut", cut), ("holes", holes), ("scan", scan)):
+        measured = share_curvatures(make(mesh, rng), DEFAULT)
+        row[kind] = {f[0]: [histogram(v, a, f) for v, a in measured] for f in FEATURES}
+    return row
+
+
+def _scores(parts: list[list[tuple]], wholes: list[tuple]) -> np.ndarray:
+    """Partial distances (parts, wholes): ``min_f (1 - sum(min(f p, w)) / f) + (2 - 2
+    sum(min(p, w)))``, `cfsig.parts.partial_scores` for histograms of mass 1, from the wholes'
+    histograms laid out densely in the cells any of them occupies."""
+    occupied = np.unique(np.concatenate([c for c, _ in wholes]))
+    dense = np.zeros((len(wholes), len(occupied)), np.float64)
+    for i, (c, w) in enumerate(wholes):
+        dense[i, np.searchsorted(occupied, c)] = w
+    shares = np.asarray(SHARES)
+    out = np.empty((len(parts), len(wholes)))
+    for i, part in enumerate(parts):
+        best = np.full(len(wholes), np.inf)
+        for share, (c, p) in zip(shares, part, strict=True):
+            at = np.searchsorted(occupied, c)
+            found = (at < len(occupied)) & (occupied[np.minimum(at, len(occupied) - 1)] == c)
+            held = dense[:, at[found]]
+            scaled = np.minimum(share * p[found], held).sum(axis=1)
+            plain = np.minimum(p[found], held).sum(axis=1)
+            best = np.minimum(best, 1 - scaled / share + 2 - 2 * plain)
+        out[i] = best
+    return out
+
+
+def measure(name: str, data_root: Path, jobs: int) -> dict:
+    """One collection: (NN, --partial FT) per feature and kind, and the median cells a whole
+    occupies per feature."""
+    paths = sorted((data_root / name).glob("*/*.off"))
+    if not paths:
+        raise SystemExit(f"no meshes under {data_root / name}: ../shared/data/unpack {name}")
+    labels = [p.parent.name for p in paths]
+    with ProcessPoolExecutor(jobs) as pool:
+        rows = list(pool.map(_one, [(p, i) for i, p in enumerate(paths)], chunksize=2))
+    signatures = np.array([r["default"] for r in rows])
+    whole_distances = l1_distances(signatures, signatures)
+    results: dict[str, dict] = {}
+    for feature, *_ in FEATURES:
+        wholes = [r["whole"][feature] for r in rows]
+        results[feature] = {"cells": float(np.median([len(c) for c, _ in wholes]))}
+        for kind in KINDS:
+            scores = _scores([r[kind][feature] for r in rows], wholes)
+            first = scores.argmin(axis=1)
+            expanded = whole_distances[first]
+            expanded[np.arange(len(first)), first] = -1.0
+            nn = evaluate_queries(scores, labels, labels).measures["NN"]
+            ft = evaluate_queries(expanded, labels, labels).measures["FT"]
+            results[feature][kind] = (nn, ft)
+    print(name, "done", flush=True)
+    return results
+
+
+def table(results: dict[str, dict]) -> list[str]:
+    """The Markdown table of NN / FT per feature, collection and kind."""
+    heads = [f"{name} {kind}" for name in COLLECTIONS for kind in KINDS]
+    first = results["shrec07"]
+    best = max(first, key=lambda n: _mean_nn(first[n]))
+    lines = [
+        f"| feature | cells a whole (median: SHREC 2007, McGill, FAUST) | {' | '.join(heads)} "
+        "| SHREC 2007 mean NN |",
+        "|---|---|" + "---|" * (len(heads) + 1),
+    ]
+    for n in first:
+        counts = ", ".join(f"{results[c][n]['cells']:.0f}" for c in COLLECTIONS)
+        values = [
+            f"{results[c][n][k][0]:.3f} / {results[c][n][k][1]:.3f}"
+            for c in COLLECTIONS
+            for k in KINDS
+        ]
+        mark = " (best)" if n == best else " (version 9)" if n == FEATURES[0][0] else ""
+        lines.append(f"| {n}{mark} | {counts} | {' | '.join(values)} | {_mean_nn(first[n]):.3f} |")
+    return lines
+
+
+def _mean_nn(kinds: dict) -> float:
+    """The mean NN over the kinds of parts."""
+    return float(np.mean([kinds[k][0] for k in KINDS]))
+
+
+def write_doc(doc: Path, lines: list[str]) -> None:
+    """Replace the study's table in ``doc`` (after its title, before the next heading)."""
+    text = doc.read_text()
+    start = text.index(TITLE)
+    head, _, rest = text[start:].partition("\n| feature |")
+    end = rest.find("\n\n")
+    body = "\n".join(lines)
+    doc.write_text(text[:start] + head + "\n" + body + rest[end:])
+
+
+def main() -> None:
+    """Measure, print the table, and write it into ``--doc``."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data-root", type=Path, default=ROOT.parent / "shared" / "data")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--doc", type=Path, help="a page holding the study's section")
+    args = parser.parse_args()
+    results = {name: measure(name, args.data_root, args.jobs) for name in COLLECTIONS}
+    lines = table(results)
+    print("\n".join(lines))
+    if args.doc:
+        write_doc(args.doc, lines)
+
+
+if __name__ == "__main__":
+    main()
