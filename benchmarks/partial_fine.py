@@ -7,7 +7,9 @@ A study, not what ``cfsig query --partial`` computes. Version 9's curvature chan
 it forgets where a vertex lies at scales two apart, and a bin is a twelfth of the curvature's
 axis wide. This asks what a part gains when the whole's histogram keeps all four scales at once
 (one cell per vertex's first bin and its three steps to the next scale, each clipped to within
-D bins: B x (2 D + 1)^3 cells), on B bins per axis, B up to 41.
+D bins: B x (2 D + 1)^3 cells), on B bins per axis, B up to 41; and whether such a histogram
+needs a finer grid of shares than `cfsig.parts.SHARES` (7, a factor sqrt(2) apart in area): 13,
+a factor 2^(1/4) apart, of which the 7 are every other one.
 
 It makes the parts of ``benchmarks/partial.py`` (the same cuts, bodies with holes and scans,
 from the same seeds) of every mesh of SHREC 2007, McGill and FAUST, measures the curvature of
@@ -19,7 +21,10 @@ stored sparse: the partial distance needs only, per share ``f``, ``sum(min(f p, 
 ``sum(min(p, w))`` over the part's own cells (`_scores`). Reported per collection and kind: NN
 by the partial distance, and the first tier of the ``--partial`` ranking (the nearest whole
 first, then the others by their version 9 whole-shape distance to it); and per feature the
-median number of cells a whole occupies, which is what an index would store per row.
+median and largest number of cells a whole occupies, which is what an index would store per
+row, and where version 9's partial distance ranks the feature's nearest whole for the cuts and
+bodies with holes (90th percentile and largest): how many candidates a first stage by version
+9's stored channel would have to keep for the feature to find what it finds alone.
 
 The ``pairs 17 2`` row is version 9's own channel through the same code, and reproduces the
 ``--partial`` rows of partial.md's tables. The best feature is the one with the best mean NN
@@ -53,16 +58,25 @@ from cfsig.signature import compute_signature
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = Params(descriptor="cfhks", version=9)
-# (name, B, D, scales jointly): version 9's adjacent pairs, then all four scales on finer bins;
-# odd B puts zero curvature mid-bin (version 5's reason), D grows with B to cover as much of
-# the axis.
+# A part is measured at each share of a grid (`cfsig.parts.SHARES`, a factor sqrt(2) apart in
+# area) as if its whole were that much larger; a fine histogram may need a finer grid: the
+# shares 2^(-j/4), whose even ones are the 7 of `SHARES`.
+FINE_SHARES = tuple(2.0 ** (-j / 4) for j in range(13))
+# (name, B, D, scales jointly, shares): version 9's adjacent pairs, then all four scales on
+# finer bins; odd B puts zero curvature mid-bin (version 5's reason), D grows with B to cover as
+# much of the axis.
 FEATURES = (
-    ("pairs 17 2", 17, 2, 2),
-    ("four 17 2", 17, 2, 4),
-    ("four 25 3", 25, 3, 4),
-    ("four 33 4", 33, 4, 4),
-    ("four 33 6", 33, 6, 4),
-    ("four 41 5", 41, 5, 4),
+    ("pairs 17 2", 17, 2, 2, 7),
+    ("four 17 2", 17, 2, 4, 7),
+    ("four 25 3", 25, 3, 4, 7),
+    ("four 33 4", 33, 4, 4, 7),
+    ("four 33 6", 33, 6, 4, 7),
+    ("four 41 5", 41, 5, 4, 7),
+    ("pairs 17 2, 13 shares", 17, 2, 2, 13),
+    ("four 17 2, 13 shares", 17, 2, 4, 13),
+    ("four 25 3, 13 shares", 25, 3, 4, 13),
+    ("four 33 4, 13 shares", 33, 4, 4, 13),
+    ("four 41 5, 13 shares", 41, 5, 4, 13),
 )
 TITLE = "## Four scales jointly, on finer bins: a study"
 
@@ -99,7 +113,7 @@ def cells(values: np.ndarray, bins: int, band: int, joint: int) -> np.ndarray:
 def histogram(values: np.ndarray, areas: np.ndarray, feature: tuple) -> tuple:
     """A surface's sparse histogram of one feature: (cells, fractions), each window summing to
     1 / windows so that the whole sums to 1 (as `cfsig.parts.partial_scores` takes mass 1)."""
-    _, bins, band, joint = feature
+    _, bins, band, joint, _ = feature
     found = cells(values, bins, band, joint)
     weights = np.repeat(areas / areas.sum() / found.shape[1], found.shape[1])
     unique, where = np.unique(found.ravel(), return_inverse=True)
@@ -117,12 +131,15 @@ def _one(item: tuple[Path, int]) -> dict:
         "whole": {f[0]: histogram(values, areas, f) for f in FEATURES},
     }
     for kind, make in (("cut", cut), ("holes", holes), ("scan", scan)):
-        measured = share_curvatures(make(mesh, rng), DEFAULT)
-        row[kind] = {f[0]: [histogram(v, a, f) for v, a in measured] for f in FEATURES}
+        measured = share_curvatures(make(mesh, rng), DEFAULT, FINE_SHARES)
+        row[kind] = {
+            f[0]: [histogram(v, a, f) for v, a in measured[:: (len(FINE_SHARES) - 1) // (f[4] - 1)]]
+            for f in FEATURES
+        }
     return row
 
 
-def _scores(parts: list[list[tuple]], wholes: list[tuple]) -> np.ndarray:
+def _scores(parts: list[list[tuple]], wholes: list[tuple], shares: tuple) -> np.ndarray:
     """Partial distances (parts, wholes): ``min_f (1 - sum(min(f p, w)) / f) + (2 - 2
     sum(min(p, w)))``, `cfsig.parts.partial_scores` for histograms of mass 1, from the wholes'
     histograms laid out densely in the cells any of them occupies."""
@@ -130,7 +147,6 @@ def _scores(parts: list[list[tuple]], wholes: list[tuple]) -> np.ndarray:
     dense = np.zeros((len(wholes), len(occupied)), np.float64)
     for i, (c, w) in enumerate(wholes):
         dense[i, np.searchsorted(occupied, c)] = w
-    shares = np.asarray(SHARES)
     out = np.empty((len(parts), len(wholes)))
     for i, part in enumerate(parts):
         best = np.full(len(wholes), np.inf)
@@ -146,8 +162,8 @@ def _scores(parts: list[list[tuple]], wholes: list[tuple]) -> np.ndarray:
 
 
 def measure(name: str, data_root: Path, jobs: int) -> dict:
-    """One collection: (NN, --partial FT) per feature and kind, and the median cells a whole
-    occupies per feature."""
+    """One collection: per feature (NN, --partial FT) per kind, the cells a whole occupies
+    (median, largest) and version 9's rank of its nearest whole (90th percentile, largest)."""
     paths = sorted((data_root / name).glob("*/*.off"))
     if not paths:
         raise SystemExit(f"no meshes under {data_root / name}: ../shared/data/unpack {name}")
@@ -157,17 +173,29 @@ def measure(name: str, data_root: Path, jobs: int) -> dict:
     signatures = np.array([r["default"] for r in rows])
     whole_distances = l1_distances(signatures, signatures)
     results: dict[str, dict] = {}
-    for feature, *_ in FEATURES:
+    version9: dict[str, np.ndarray] = {}  # the first feature's scores, per kind
+    for feature, *_, count in FEATURES:
+        shares = SHARES if count == len(SHARES) else FINE_SHARES
         wholes = [r["whole"][feature] for r in rows]
-        results[feature] = {"cells": float(np.median([len(c) for c, _ in wholes]))}
+        sizes = [len(c) for c, _ in wholes]
+        results[feature] = {"cells": (float(np.median(sizes)), max(sizes))}
+        ranks = []
         for kind in KINDS:
-            scores = _scores([r[kind][feature] for r in rows], wholes)
+            scores = _scores([r[kind][feature] for r in rows], wholes, shares)
             first = scores.argmin(axis=1)
+            base = version9.setdefault(kind, scores)
+            # Where version 9's partial distance ranks this feature's nearest whole: a first
+            # stage by version 9 that keeps at least this many finds it.
+            held = base[np.arange(len(first)), first][:, None]
+            if kind != "scan":  # the kinds of the issue's bars
+                ranks.append((base < held).sum(axis=1) + 1)
             expanded = whole_distances[first]
             expanded[np.arange(len(first)), first] = -1.0
             nn = evaluate_queries(scores, labels, labels).measures["NN"]
             ft = evaluate_queries(expanded, labels, labels).measures["FT"]
             results[feature][kind] = (nn, ft)
+        ranks = np.concatenate(ranks)
+        results[feature]["rank"] = (float(np.percentile(ranks, 90)), int(ranks.max()))
     print(name, "done", flush=True)
     return results
 
@@ -178,19 +206,22 @@ def table(results: dict[str, dict]) -> list[str]:
     first = results["shrec07"]
     best = max(first, key=lambda n: _mean_nn(first[n]))
     lines = [
-        f"| feature | cells a whole (median: SHREC 2007, McGill, FAUST) | {' | '.join(heads)} "
-        "| SHREC 2007 mean NN |",
-        "|---|---|" + "---|" * (len(heads) + 1),
+        f"| feature | cells a whole (median / largest: SHREC 2007, McGill, FAUST) | its nearest "
+        f"whole's rank by version 9's partial distance, cuts and holes (90th percentile / "
+        f"largest) | {' | '.join(heads)} | SHREC 2007 mean NN |",
+        "|---|---|---|" + "---|" * (len(heads) + 1),
     ]
     for n in first:
-        counts = ", ".join(f"{results[c][n]['cells']:.0f}" for c in COLLECTIONS)
+        counts = ", ".join("{:.0f} / {}".format(*results[c][n]["cells"]) for c in COLLECTIONS)
+        ranks = ", ".join("{:.0f} / {}".format(*results[c][n]["rank"]) for c in COLLECTIONS)
         values = [
             f"{results[c][n][k][0]:.3f} / {results[c][n][k][1]:.3f}"
             for c in COLLECTIONS
             for k in KINDS
         ]
         mark = " (best)" if n == best else " (version 9)" if n == FEATURES[0][0] else ""
-        lines.append(f"| {n}{mark} | {counts} | {' | '.join(values)} | {_mean_nn(first[n]):.3f} |")
+        mean = _mean_nn(first[n])
+        lines.append(f"| {n}{mark} | {counts} | {ranks} | {' | '.join(values)} | {mean:.3f} |")
     return lines
 
 
