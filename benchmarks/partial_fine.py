@@ -24,7 +24,10 @@ first, then the others by their version 9 whole-shape distance to it); and per f
 median and largest number of cells a whole occupies, which is what an index would store per
 row, and where version 9's partial distance ranks the feature's nearest whole for the cuts and
 bodies with holes (90th percentile and largest): how many candidates a first stage by version
-9's stored channel would have to keep for the feature to find what it finds alone.
+9's stored channel would have to keep for the feature to find what it finds alone; and, per
+indexed row, how many entries lists of the rows holding each cell would give for a part's cells
+(the union over its shares; median over the cuts and holes): the work of a search that reads
+such lists instead of every row.
 
 The ``pairs 17 2`` row is version 9's own channel through the same code, and reproduces the
 ``--partial`` rows of partial.md's tables. The best feature is the one with the best mean NN
@@ -161,9 +164,19 @@ def _scores(parts: list[list[tuple]], wholes: list[tuple], shares: tuple) -> np.
     return out
 
 
+def _reads(part: list[tuple], held: np.ndarray, holders: np.ndarray) -> float:
+    """How many (row, fraction) entries lists of the rows holding each cell give for a part's
+    cells (over all its shares): the wholes holding each, summed."""
+    cells = np.unique(np.concatenate([c for c, _ in part]))
+    at = np.searchsorted(held, cells)
+    found = (at < len(held)) & (held[np.minimum(at, len(held) - 1)] == cells)
+    return float(holders[at[found]].sum())
+
+
 def measure(name: str, data_root: Path, jobs: int) -> dict:
     """One collection: per feature (NN, --partial FT) per kind, the cells a whole occupies
-    (median, largest) and version 9's rank of its nearest whole (90th percentile, largest)."""
+    (median, largest), version 9's rank of its nearest whole (90th percentile, largest) and the
+    entries an inverted-list scan of the wholes would read per whole (median)."""
     paths = sorted((data_root / name).glob("*/*.off"))
     if not paths:
         raise SystemExit(f"no meshes under {data_root / name}: ../shared/data/unpack {name}")
@@ -179,16 +192,18 @@ def measure(name: str, data_root: Path, jobs: int) -> dict:
         wholes = [r["whole"][feature] for r in rows]
         sizes = [len(c) for c, _ in wholes]
         results[feature] = {"cells": (float(np.median(sizes)), max(sizes))}
-        ranks = []
+        ranks, reads = [], []
+        held, holders = np.unique(np.concatenate([c for c, _ in wholes]), return_counts=True)
         for kind in KINDS:
             scores = _scores([r[kind][feature] for r in rows], wholes, shares)
             first = scores.argmin(axis=1)
             base = version9.setdefault(kind, scores)
             # Where version 9's partial distance ranks this feature's nearest whole: a first
             # stage by version 9 that keeps at least this many finds it.
-            held = base[np.arange(len(first)), first][:, None]
+            at_first = base[np.arange(len(first)), first][:, None]
             if kind != "scan":  # the kinds of the issue's bars
-                ranks.append((base < held).sum(axis=1) + 1)
+                ranks.append((base < at_first).sum(axis=1) + 1)
+                reads += [_reads(r[kind][feature], held, holders) / len(rows) for r in rows]
             expanded = whole_distances[first]
             expanded[np.arange(len(first)), first] = -1.0
             nn = evaluate_queries(scores, labels, labels).measures["NN"]
@@ -196,6 +211,7 @@ def measure(name: str, data_root: Path, jobs: int) -> dict:
             results[feature][kind] = (nn, ft)
         ranks = np.concatenate(ranks)
         results[feature]["rank"] = (float(np.percentile(ranks, 90)), int(ranks.max()))
+        results[feature]["reads"] = float(np.median(reads))
     print(name, "done", flush=True)
     return results
 
@@ -208,8 +224,9 @@ def table(results: dict[str, dict]) -> list[str]:
     lines = [
         f"| feature | cells a whole (median / largest: SHREC 2007, McGill, FAUST) | its nearest "
         f"whole's rank by version 9's partial distance, cuts and holes (90th percentile / "
-        f"largest) | {' | '.join(heads)} | SHREC 2007 mean NN |",
-        "|---|---|---|" + "---|" * (len(heads) + 1),
+        f"largest) | entries an inverted-list scan reads per indexed row (median over cuts and "
+        f"holes) | {' | '.join(heads)} | SHREC 2007 mean NN |",
+        "|---|---|---|---|" + "---|" * (len(heads) + 1),
     ]
     for n in first:
         counts = ", ".join("{:.0f} / {}".format(*results[c][n]["cells"]) for c in COLLECTIONS)
@@ -220,8 +237,10 @@ def table(results: dict[str, dict]) -> list[str]:
             for k in KINDS
         ]
         mark = " (best)" if n == best else " (version 9)" if n == FEATURES[0][0] else ""
+        reads = ", ".join(f"{results[c][n]['reads']:.0f}" for c in COLLECTIONS)
         mean = _mean_nn(first[n])
-        lines.append(f"| {n}{mark} | {counts} | {ranks} | {' | '.join(values)} | {mean:.3f} |")
+        cells = f"{counts} | {ranks} | {reads}"
+        lines.append(f"| {n}{mark} | {cells} | {' | '.join(values)} | {mean:.3f} |")
     return lines
 
 
