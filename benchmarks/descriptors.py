@@ -181,7 +181,7 @@ def _measure_some(path: Path, names: tuple[str, ...]) -> dict:
     return row
 
 
-def _paths(data_root: Path, name: str) -> list[Path]:
+def collection_paths(data_root: Path, name: str) -> list[Path]:
     """The OFF files of one collection, in sorted order."""
     paths = sorted((data_root / name).glob("*/*.off"))
     if not paths:
@@ -194,7 +194,7 @@ def measure(args: argparse.Namespace) -> None:
     ``--only``, those descriptors only, replacing theirs in the existing cache."""
     args.cache.mkdir(parents=True, exist_ok=True)
     for name in COLLECTIONS:
-        paths = _paths(args.data_root, name)
+        paths = collection_paths(args.data_root, name)
         work = partial(_measure_some, names=tuple(args.only)) if args.only else _measure_one
         with ProcessPoolExecutor(args.jobs) as pool:
             rows = list(pool.map(work, paths, chunksize=2))
@@ -458,7 +458,9 @@ def tolerance(args: argparse.Namespace) -> None:
     within: dict[float, bool] = dict.fromkeys(TOLERANCES, True)
     for name in COLLECTIONS:
         with ProcessPoolExecutor(args.jobs) as pool:
-            rows = list(pool.map(_tolerance_one, _paths(args.data_root, name), chunksize=4))
+            rows = list(
+                pool.map(_tolerance_one, collection_paths(args.data_root, name), chunksize=4)
+            )
         tight = np.array([row[TOLERANCES[0]] for row in rows])
         median = _median(_pairwise(tight)) * tight.shape[1]
         for tol in TOLERANCES:
@@ -509,7 +511,7 @@ def noise(args: argparse.Namespace) -> None:
     print("| collection | scale | mean movement / median distance | clean FT | noisy against "
           "clean FT |\n|---|---|---|---|---|")  # fmt: skip
     for name in COLLECTIONS:
-        paths = _paths(args.data_root, name)
+        paths = collection_paths(args.data_root, name)
         with ProcessPoolExecutor(args.jobs) as pool:
             rows = list(pool.map(_noise_one, [(p, i) for i, p in enumerate(paths)], chunksize=4))
         labels = [p.parent.name for p in paths]
@@ -577,7 +579,7 @@ def _study7_cache(
         cache = args.cache / f"study7-{name}{suffix}.npz"
         if not cache.exists():
             args.cache.mkdir(parents=True, exist_ok=True)
-            paths = _paths(args.data_root, name)
+            paths = collection_paths(args.data_root, name)
             with ProcessPoolExecutor(args.jobs) as pool:
                 items = [(p, i) for i, p in enumerate(paths)]
                 rows = list(pool.map(partial(_study7_one, faces=faces), items, chunksize=4))
@@ -816,7 +818,8 @@ def study8(args: argparse.Namespace) -> None:
             weights, mean = _best_of(every[faces][1], pairs)
             rows.append((faces, pairs, scans, weights, mean))
     designs = [_candidate_design(scans, w, faces) for faces, _, scans, w, _ in rows]
-    paths = sorted(_paths(args.data_root, "shrec07"), key=lambda p: int(p.stem))[:: args.every]
+    paths = sorted(collection_paths(args.data_root, "shrec07"), key=lambda p: int(p.stem))
+    paths = paths[:: args.every]
     seconds = np.median([_candidate_seconds(path, designs) for path in paths], axis=0)
     best = max(mean for *_, mean in rows)
     bars = [_meets_bars(scans, weights, shapedna) for _, _, scans, weights, _ in rows]
@@ -935,7 +938,7 @@ def _timed_process(command: list[str]) -> tuple[float, float]:
 
 def cost(args: argparse.Namespace) -> None:
     """Whole-process times of indexing with the default, with cf, and of ShapeDNA."""
-    paths = sorted(_paths(args.data_root, "shrec07"), key=lambda p: int(p.stem))
+    paths = sorted(collection_paths(args.data_root, "shrec07"), key=lambda p: int(p.stem))
     subset = paths[:: args.every]
     runs: dict[str, list[tuple[float, float]]] = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -1017,7 +1020,7 @@ def coarse(args: argparse.Namespace) -> None:
     for faces in args.faces:
         rows[str(faces)], on_copy[faces] = {}, {}
         for c in COLLECTIONS:
-            items = [(path, faces) for path in _paths(args.data_root, c)]
+            items = [(path, faces) for path in collection_paths(args.data_root, c)]
             with ProcessPoolExecutor(args.jobs) as pool:
                 measured = list(pool.map(_coarse_one, items, chunksize=2))
             labels = data[c]["labels"]
@@ -1127,7 +1130,7 @@ def stages(args: argparse.Namespace) -> None:
     table: dict[str, list[float]] = {}
     difference, moved = 0.0, {"moved": [], "moved, 48 bins": []}
     for name in ("shrec07", "faust"):
-        paths = _paths(args.data_root, name)
+        paths = collection_paths(args.data_root, name)
         if name == "shrec07":
             paths.sort(key=lambda p: int(p.stem))
         paths = paths[:: args.every]

@@ -51,7 +51,7 @@ from pathlib import Path
 import messy
 import numpy as np
 import scipy.sparse as sp
-from descriptors import shapedna
+from descriptors import collection_paths, shapedna
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from cfsig import cfhks
@@ -195,9 +195,7 @@ def _one(item: tuple[Path, int, bool]) -> dict:
 def _measure(name: str, data_root: Path, jobs: int, every: int) -> dict:
     """Every row of one collection (every k-th mesh), its labels, and the partial distance of
     each part of a kind (rows) to each whole (columns), for the tables that rank by it."""
-    paths = sorted((data_root / name).glob("*/*.off"))[::every]
-    if not paths:
-        raise SystemExit(f"no meshes under {data_root / name}: ../shared/data/unpack {name}")
+    paths = collection_paths(data_root, name)[::every]
     with ProcessPoolExecutor(jobs) as pool:
         items = [(p, i, name == "shrec07") for i, p in enumerate(paths)]
         rows = list(pool.map(_one, items, chunksize=2))

@@ -48,6 +48,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from descriptors import collection_paths
 from partial import COLLECTIONS, KINDS, cut, holes, scan
 
 from cfsig.cfhks import curvature_bins
@@ -136,7 +137,7 @@ def _one(item: tuple[Path, int]) -> dict:
     for kind, make in (("cut", cut), ("holes", holes), ("scan", scan)):
         measured = share_curvatures(make(mesh, rng), DEFAULT, FINE_SHARES)
         row[kind] = {
-            f[0]: [histogram(v, a, f) for v, a in measured[:: (len(FINE_SHARES) - 1) // (f[4] - 1)]]
+            f[0]: [histogram(v, a, f) for v, a in (measured if f[4] == 13 else measured[::2])]
             for f in FEATURES
         }
     return row
@@ -154,8 +155,7 @@ def _scores(parts: list[list[tuple]], wholes: list[tuple], shares: tuple) -> np.
     for i, part in enumerate(parts):
         best = np.full(len(wholes), np.inf)
         for share, (c, p) in zip(shares, part, strict=True):
-            at = np.searchsorted(occupied, c)
-            found = (at < len(occupied)) & (occupied[np.minimum(at, len(occupied) - 1)] == c)
+            at, found = _lookup(occupied, c)
             held = dense[:, at[found]]
             scaled = np.minimum(share * p[found], held).sum(axis=1)
             plain = np.minimum(p[found], held).sum(axis=1)
@@ -167,19 +167,21 @@ def _scores(parts: list[list[tuple]], wholes: list[tuple], shares: tuple) -> np.
 def _reads(part: list[tuple], held: np.ndarray, holders: np.ndarray) -> float:
     """How many (row, fraction) entries lists of the rows holding each cell give for a part's
     cells (over all its shares): the wholes holding each, summed."""
-    cells = np.unique(np.concatenate([c for c, _ in part]))
-    at = np.searchsorted(held, cells)
-    found = (at < len(held)) & (held[np.minimum(at, len(held) - 1)] == cells)
+    at, found = _lookup(held, np.unique(np.concatenate([c for c, _ in part])))
     return float(holders[at[found]].sum())
+
+
+def _lookup(table: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where each cell would sit in the sorted ``table``, and whether it is there."""
+    at = np.searchsorted(table, cells)
+    return at, (at < len(table)) & (table[np.minimum(at, len(table) - 1)] == cells)
 
 
 def measure(name: str, data_root: Path, jobs: int) -> dict:
     """One collection: per feature (NN, --partial FT) per kind, the cells a whole occupies
     (median, largest), version 9's rank of its nearest whole (90th percentile, largest) and the
     entries an inverted-list scan of the wholes would read per whole (median)."""
-    paths = sorted((data_root / name).glob("*/*.off"))
-    if not paths:
-        raise SystemExit(f"no meshes under {data_root / name}: ../shared/data/unpack {name}")
+    paths = collection_paths(data_root, name)
     labels = [p.parent.name for p in paths]
     with ProcessPoolExecutor(jobs) as pool:
         rows = list(pool.map(_one, [(p, i) for i, p in enumerate(paths)], chunksize=2))
@@ -209,8 +211,8 @@ def measure(name: str, data_root: Path, jobs: int) -> dict:
             nn = evaluate_queries(scores, labels, labels).measures["NN"]
             ft = evaluate_queries(expanded, labels, labels).measures["FT"]
             results[feature][kind] = (nn, ft)
-        ranks = np.concatenate(ranks)
-        results[feature]["rank"] = (float(np.percentile(ranks, 90)), int(ranks.max()))
+        ranked = np.concatenate(ranks)
+        results[feature]["rank"] = (float(np.percentile(ranked, 90)), int(ranked.max()))
         results[feature]["reads"] = float(np.median(reads))
     print(name, "done", flush=True)
     return results

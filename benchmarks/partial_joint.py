@@ -46,6 +46,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from descriptors import collection_paths
 from partial import COLLECTIONS, KINDS, cut, holes, scan
 
 from cfsig.cfhks import DESIGNS, curvature_histograms, curvature_shape, weigh_curvature
@@ -131,9 +132,7 @@ def _scores(parts: list[dict], wholes: np.ndarray, name: str) -> np.ndarray:
 def measure(name: str, data_root: Path, jobs: int) -> dict:
     """One collection: ``"parts"``, (NN, --partial FT) of each feature and kind; ``"labels"``,
     ``"signatures"`` and ``"wholes"`` (each single feature's rows) of its meshes."""
-    paths = sorted((data_root / name).glob("*/*.off"))
-    if not paths:
-        raise SystemExit(f"no meshes under {data_root / name}: ../shared/data/unpack {name}")
+    paths = collection_paths(data_root, name)
     labels = [p.parent.name for p in paths]
     with ProcessPoolExecutor(jobs) as pool:
         rows = list(pool.map(_one, [(p, i) for i, p in enumerate(paths)], chunksize=2))
