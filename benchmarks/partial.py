@@ -63,7 +63,9 @@ from cfsig.params import VERSIONS, Params
 from cfsig.parts import (
     HISTOGRAM_WEIGHT,
     SHARES,
+    Part,
     expanded_distances,
+    measure_part,
     partial_distances,
     partial_scores,
     partial_vectors,
@@ -74,7 +76,9 @@ from cfsig.signature import compute_signature
 ROOT = Path(__file__).resolve().parents[1]
 COLLECTIONS = ("shrec07", "mcgill", "faust")
 KINDS = ("cut", "holes", "scan")
-DEFAULT = Params(descriptor="cfhks")  # the latest version
+DEFAULT = Params(descriptor="cfhks")  # the default version
+# Version 10: the default's vector (the same values, tests/test_cells.py) and fine cells.
+FINE = Params(descriptor="cfhks", version=10)
 DESIGN = cfhks.DESIGNS[DEFAULT.version or 0]
 # The earlier versions of the genus table (SHREC 2007 only).
 EARLIER = tuple(v for v in VERSIONS["cfhks"] if 2 <= v < (DEFAULT.version or 0))
@@ -173,8 +177,12 @@ def _one(item: tuple[Path, int, bool]) -> dict:
     path, seed, genus = item
     rng = np.random.default_rng(seed)
     mesh = read_mesh(path)
+    whole = compute_signature(mesh, FINE)
+    assert whole.cells is not None  # version 10 keeps them
     row: dict = {
-        "default": compute_signature(mesh, DEFAULT).vector,
+        "default": whole.vector,
+        "cells": whole.cells[0],
+        "fractions": whole.cells[1],
         "chi": len(mesh.vertices)
         - len(mesh_edges(mesh.faces, len(mesh.vertices)).ends)
         + len(mesh.faces),
@@ -188,6 +196,7 @@ def _one(item: tuple[Path, int, bool]) -> dict:
         part = make(mesh, rng)
         row[f"{kind} share"] = _area(part).sum() / _area(mesh).sum()
         row[f"{kind} partial"] = partial_vectors(part, DEFAULT)
+        row[f"{kind} fine"] = measure_part(part, FINE)
         row[f"{kind} whole"] = compute_signature(part, DEFAULT).vector
     return row
 
@@ -199,10 +208,18 @@ def _measure(name: str, data_root: Path, jobs: int, every: int) -> dict:
     with ProcessPoolExecutor(jobs) as pool:
         items = [(p, i, name == "shrec07") for i, p in enumerate(paths)]
         rows = list(pool.map(_one, items, chunksize=2))
-    data = {key: np.array([row[key] for row in rows]) for key in rows[0]}
+    data = {key: np.array([row[key] for row in rows]) for key in rows[0] if "fine" not in key}
+    data |= {key: [row[key] for row in rows] for key in rows[0] if "fine" in key}
+    cells = data["cells"], data["fractions"]
     for kind in KINDS:
         data[f"{kind} partial distances"] = np.array(
-            [partial_distances(v, data["default"], DEFAULT) for v in data[f"{kind} partial"]]
+            [
+                partial_distances(Part(vectors=v), data["default"], DEFAULT)
+                for v in data[f"{kind} partial"]
+            ]
+        )
+        data[f"{kind} fine distances"] = np.array(
+            [partial_distances(p, data["default"], FINE, cells) for p in data[f"{kind} fine"]]
         )
     return {
         "labels": [p.parent.name for p in paths],
@@ -222,11 +239,19 @@ def _partial_table(results: dict[str, dict]) -> list[str]:
         wholes = data["default"]
         for kind in KINDS:
             share = data[f"{kind} share"]
+            cells = data["cells"], data["fractions"]
             rankings = {
                 "as a whole shape": l1_distances(data[f"{kind} whole"], wholes),
                 "partial distance": data[f"{kind} partial distances"],
                 "--partial": np.array(
-                    [expanded_distances(v, wholes, DEFAULT) for v in data[f"{kind} partial"]]
+                    [
+                        expanded_distances(Part(vectors=v), wholes, DEFAULT)
+                        for v in data[f"{kind} partial"]
+                    ]
+                ),
+                "partial distance, version 10": data[f"{kind} fine distances"],
+                "--partial, version 10": np.array(
+                    [expanded_distances(p, wholes, FINE, cells) for p in data[f"{kind} fine"]]
                 ),
             }
             for ranked, distances in rankings.items():
@@ -354,14 +379,14 @@ def scale(rows: int, real: str, folder: Path) -> str:
     code = f"""
 import numpy as np
 from cfsig.index import IndexReader
-from cfsig.parts import SHARES, curvature_columns, partial_search
+from cfsig.parts import SHARES, Part, curvature_columns, partial_search
 from benchmarks.index_scale import PARAMS, real_rows, synthetic_rows
 rows = synthetic_rows(np.random.default_rng(6), len(SHARES), real_rows({real!r}))
 vectors = rows[:, curvature_columns(PARAMS)]
 def once():
     t = time.perf_counter()
     with IndexReader({str(path)!r}) as r:
-        hits, _ = partial_search(r, vectors, {K})
+        hits, _ = partial_search(r, Part(vectors=vectors), {K})
     return time.perf_counter() - t
 once()
 out = {{'times': [once() for _ in range(3)]}}

@@ -56,6 +56,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .cells import Cells, curvature_bins, packed_cells
 from .conformal import ConformalFactor, Operators, laplacian_solver, operators
 from .curvature import CG_TOLERANCE, smoothed_curvature
 from .errors import SolverError
@@ -65,8 +66,6 @@ from .spectrum import Spectrum, heat_kernel_signature, laplace_spectrum
 
 QUANTILES = 64
 EIGENPAIRS = 30
-CURVATURE_RANGE = 6.0  # bins span asinh(value / CURVATURE_UNIT) in [-6, 6]: +-2000 in value
-CURVATURE_UNIT = 10.0  # about the sphere's 4 pi: the histogram is linear below, logarithmic above
 
 
 @dataclass(frozen=True)
@@ -96,6 +95,9 @@ class Design:
     band : int or None
         Make the curvature channel the joint histograms of adjacent scales within this many
         bins of the diagonal (`curvature_histograms`); None: a histogram per scale.
+    fine : (int, int) or None
+        Bins and band of the fine cells of all the curvature scales jointly, kept beside the
+        vector for partial queries (`cfsig.cells.packed_cells`); None keeps none.
     tolerance : float
         Relative residual of the curvature's conjugate gradients.
     predict : bool
@@ -120,6 +122,7 @@ class Design:
     eigenpairs: int = EIGENPAIRS
     curvature_on_copy: bool = False
     band: int | None = None
+    fine: tuple[int, int] | None = None
 
     @property
     def length(self) -> int:
@@ -193,6 +196,11 @@ DESIGNS[8] = replace(
 # over SHREC 2007's and FAUST's pairs averaged over its histograms, per entry as `weigh`
 # divides: `python benchmarks/descriptors.py divisor --version 9`.
 DESIGNS[9] = replace(DESIGNS[8], bins=17, band=2, curvature=0.023645)
+# Version 10: version 9's vector, and beside it the fine cells of the four curvature scales
+# jointly, 33 bins and steps within 4, for partial queries: the best by version 9's rule (the
+# mean NN over SHREC 2007's three kinds of parts) in `python benchmarks/partial_fine.py`
+# (docs/partial.md, "Four scales jointly, on finer bins"; docs/method.md, section 19).
+DESIGNS[10] = replace(DESIGNS[9], fine=(33, 4))
 
 
 def weighted_quantiles(values: np.ndarray, weights: np.ndarray, count: int) -> np.ndarray:
@@ -224,12 +232,12 @@ def curvature_histograms(
 ) -> np.ndarray:
     """Histograms of curvature at scales, the ``curvature`` channel.
 
-    Each vertex falls in the bin of ``asinh(value / CURVATURE_UNIT)`` on [-CURVATURE_RANGE,
-    CURVATURE_RANGE], values beyond in the end bins. Without ``band``, one histogram per scale;
-    with it, one joint histogram per pair of adjacent scales: where a vertex's curvature lies at
-    one scale and at the next, which the per-scale histograms forget, the second scale's bin
-    taken relative to the first's and clipped to within ``band`` bins of it, where nearly all
-    the mass lies (docs/partial.md, "Joint histograms of adjacent scales").
+    Each vertex falls in its bin of `cfsig.cells.curvature_bins`. Without ``band``, one
+    histogram per scale; with it, one joint histogram per pair of adjacent scales: where a
+    vertex's curvature lies at one scale and at the next, which the per-scale histograms
+    forget, the second scale's bin taken relative to the first's and clipped to within
+    ``band`` bins of it, where nearly all the mass lies (docs/partial.md, "Joint histograms of
+    adjacent scales").
 
     Parameters
     ----------
@@ -258,27 +266,6 @@ def curvature_histograms(
     fractions = weights / weights.sum()
     counts = [np.bincount(b, weights=fractions, minlength=width) for b in index.T]
     return np.array(counts).reshape(index.shape[1], width)
-
-
-def curvature_bins(values: np.ndarray, bins: int) -> np.ndarray:
-    """The bin of each curvature value on the axis of `curvature_histograms`.
-
-    Parameters
-    ----------
-    values : (n, k) float64
-        Curvature at k scales, dimensionless.
-    bins : int
-        Bins on the axis: ``asinh(value / CURVATURE_UNIT)`` on [-CURVATURE_RANGE,
-        CURVATURE_RANGE], values beyond in the end bins.
-
-    Returns
-    -------
-    bins : (n, k) intp
-        In [0, bins).
-    """
-    position = np.arcsinh(values / CURVATURE_UNIT) + CURVATURE_RANGE
-    position *= bins / (2 * CURVATURE_RANGE)
-    return np.clip(position, 0, bins - 1).astype(np.intp)
 
 
 def curvature_shape(design: Design) -> tuple[int, int]:
@@ -325,6 +312,8 @@ def channels(
         eigenvalues repeats its largest. ``"heat"``: (len(times), QUANTILES) quantiles of
         ``log(area * h_t)``. ``"curvature"``: `curvature_histograms` of `curvature_shape`.
         ``"phi"``: (QUANTILES,) quantiles of phi, dimensionless, when ``phi`` is given.
+        ``"cells"`` and ``"cell_fractions"``: `cfsig.cells.packed_cells` of the curvature, when
+        the design keeps them (``design.fine``).
 
     Raises
     ------
@@ -344,6 +333,10 @@ def channels(
         "heat": heat,
         "curvature": curvature_histograms(curvature, weights, design.bins, design.band),
     }
+    if design.fine is not None:
+        parts["cells"], parts["cell_fractions"] = packed_cells(
+            curvature, ops.vertex_area, *design.fine
+        )
     if phi is not None:
         parts["phi"] = weighted_quantiles(phi, weights, QUANTILES)
     return parts
@@ -491,8 +484,8 @@ def cfhks_vector(
     version: int,
     cf: ConformalFactor | None = None,
     solver: str = "auto",
-) -> np.ndarray:
-    """The ``cfhks`` descriptor of a mesh.
+) -> tuple[np.ndarray, Cells | None]:
+    """The ``cfhks`` descriptor of a mesh, and its fine cells when the version keeps them.
 
     Parameters
     ----------
@@ -513,6 +506,8 @@ def cfhks_vector(
     -------
     vector : (DESIGNS[version].length,) float64
         See `weigh`.
+    cells : Cells or None
+        `cfsig.cells.packed_cells` of its curvature, for the versions with ``fine`` cells.
 
     Raises
     ------
@@ -524,9 +519,9 @@ def cfhks_vector(
     design = DESIGNS[version]
     if solves_phi(version) and cf is None:
         raise ValueError(f"cfhks version {version} holds phi: give its conformal factor")
-    vector = copy_vector(mesh, version, solver)
-    if vector is not None:
-        return vector
+    found = copy_vector(mesh, version, solver)
+    if found is not None:
+        return found
     # Versions 4 to 6 take the spectrum from the copy; a version with every channel on the copy
     # gets here only without a usable copy, and takes the mesh itself.
     coarse = None
@@ -535,10 +530,12 @@ def cfhks_vector(
     solve = None if cf is None else cf.solve
     spectrum, _ = spectrum_of(ops, coarse, solve, solver, design.eigenpairs)
     phi = cf.phi if cf is not None and solves_phi(version) else None  # else weigh drops it
-    return weigh(channels(ops, spectrum, design, phi), design)
+    return _descriptor(channels(ops, spectrum, design, phi), design)
 
 
-def copy_vector(mesh: Mesh, version: int, solver: str = "auto") -> np.ndarray | None:
+def copy_vector(
+    mesh: Mesh, version: int, solver: str = "auto"
+) -> tuple[np.ndarray, Cells | None] | None:
     """The ``cfhks`` descriptor of a mesh from its simplified copy alone, for the versions whose
     channels are all on the copy: the mesh's own operators are not needed.
 
@@ -553,10 +550,10 @@ def copy_vector(mesh: Mesh, version: int, solver: str = "auto") -> np.ndarray | 
 
     Returns
     -------
-    vector : (DESIGNS[version].length,) float64 or None
+    vector, cells : or None
         As `cfhks_vector` returns; None when the version computes a channel on the mesh itself,
         the mesh has no more faces than the copy would, or the copy cannot be solved: then
-        `cfhks_vector` with the mesh's operators gives the vector.
+        `cfhks_vector` with the mesh's operators gives them.
 
     Raises
     ------
@@ -571,7 +568,13 @@ def copy_vector(mesh: Mesh, version: int, solver: str = "auto") -> np.ndarray | 
     if found is None:
         return None
     spectrum, surface = found
-    return weigh(channels(surface, spectrum, design), design)
+    return _descriptor(channels(surface, spectrum, design), design)
+
+
+def _descriptor(parts: dict[str, np.ndarray], design: Design) -> tuple[np.ndarray, Cells | None]:
+    """The vector of some channels (`weigh`) and their fine cells, if the design keeps them."""
+    cells = (parts["cells"], parts["cell_fractions"]) if design.fine is not None else None
+    return weigh(parts, design), cells
 
 
 def solves_phi(version: int) -> bool:

@@ -54,7 +54,7 @@ _descriptor_option = click.option(
     type=click.Choice(DESCRIPTORS),
     default=None,
     help="What to compute: the paper's histogram (cf) or the spectrum and heat kernel "
-    "signatures (cfhks, its latest version) [compute: cf; index: cfhks, or an existing "
+    "signatures (cfhks, its default version) [compute: cf; index: cfhks, or an existing "
     "index's own descriptor and version].",
 )
 _solver_option = click.option(
@@ -103,7 +103,7 @@ def _with(options: list[Callable]) -> Callable:
 def _params(base: Params | None = None, **given: Any) -> Params:
     """Parameters from the options that were given, on top of ``base`` or the defaults.
 
-    A descriptor other than ``base``'s is taken at its latest version.
+    A descriptor other than ``base``'s is taken at its default version.
     """
     given = {k: v for k, v in given.items() if v is not None}
     try:

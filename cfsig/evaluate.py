@@ -255,14 +255,15 @@ def evaluate_partial(
     with IndexReader(index) as reader:
         params = reader.params
         curvature_columns(params)
-        labels, signatures = reader.column("labels"), reader.signatures[:]
+        labels, signatures, cells = reader.column("labels"), reader.signatures[:], reader.cells()
     found = dict(find_meshes([folder]))
     if not found:
         raise MeshError(f"{folder}: no mesh files")
     rows, asked, failures = [], [], []
     for path in found:
         try:
-            rows.append(expanded_distances(partial_file(path, params), signatures, params))
+            part = partial_file(path, params)
+            rows.append(expanded_distances(part, signatures, params, cells))
             asked.append(mesh_label(path))
         except MeshError as exc:
             failures.append(str(exc))

@@ -36,8 +36,9 @@ import numpy as np
 
 from . import __version__
 from .errors import IndexFileError
-from .params import Params, curvature_slice, signature_length
+from .params import Params, cell_slots, curvature_slice, signature_length
 from .segments import (
+    CELLS,
     COLUMNS,
     CURVATURE_EXTRA,
     META,
@@ -147,6 +148,10 @@ class SegmentView:
         The curvature channel's columns stored on their own, which a search of those columns
         reads instead of the signatures; None for a descriptor without that channel, a segment
         written before the copy existed, or a format-1 file.
+    cells : (h5py.Dataset, h5py.Dataset) or None
+        The fine curvature cells of its rows, (rows, slots) uint16, and their fractions,
+        (rows, slots) float32 (`cfsig.cells.packed_cells`); None for a descriptor that keeps
+        none.
     """
 
     signatures: h5py.Dataset
@@ -154,6 +159,7 @@ class SegmentView:
     dead: np.ndarray
     sketch: Sketch | None = None
     curvature: ColumnCopy | None = None
+    cells: tuple[h5py.Dataset, h5py.Dataset] | None = None
 
 
 @dataclass(frozen=True)
@@ -230,9 +236,11 @@ class IndexReader:
             dead = _dead_rows(manifest.segments, files, self.path)
             views, start = [], 0
             for info, f in zip(manifest.segments, files, strict=True):
-                sketch = _read_sketch(f, self.path / info.file)
-                copy = _read_curvature(f, self.path / info.file)
-                views.append(SegmentView(f["signatures"], start, dead[info.id], sketch, copy))
+                where = self.path / info.file
+                sketch, copy = _read_sketch(f, where), _read_curvature(f, where)
+                cells = _read_cells(f, where, cell_slots(manifest.params))
+                view = SegmentView(f["signatures"], start, dead[info.id], sketch, copy, cells)
+                views.append(view)
                 start += info.rows
             return manifest.params, views
         raise AssertionError("unreachable")  # pragma: no cover
@@ -334,6 +342,26 @@ class IndexReader:
             values = data.asstr()[:] if data.dtype.kind in "OS" else data[:]
             parts.append(np.delete(values, view.dead))
         return np.concatenate(parts) if parts else np.zeros(0, META.get(key, object))
+
+    def cells(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Every row's fine curvature cells and their fractions, read into memory.
+
+        Returns
+        -------
+        cells : ((N, slots) uint16, (N, slots) float32) or None
+            `cfsig.cells.packed_cells` of each row; None when the index's descriptor keeps none.
+        """
+        slots = cell_slots(self.params)
+        if slots is None:
+            return None
+        stored = [(view.cells, view.dead) for view in self.segments if view.cells is not None]
+        cells, fractions = (
+            np.concatenate(
+                [np.zeros((0, slots), dtype), *(np.delete(c[i][:], d, axis=0) for c, d in stored)]
+            )
+            for i, dtype in enumerate(CELLS.values())
+        )
+        return cells, fractions
 
 
 class Signatures:
@@ -475,7 +503,16 @@ class IndexWriter:
             Name, label and path.
         signature : Signature
             Its signature, made with this writer's parameters.
+
+        Raises
+        ------
+        ValueError
+            The parameters keep fine cells (`cfsig.params.cell_slots`) and the signature has
+            none, or of another width.
         """
+        slots = cell_slots(self.params)
+        if slots is not None and (signature.cells is None or len(signature.cells[0]) != slots):
+            raise ValueError(f"{entry.name}: no fine cells, which these parameters keep")
         self._pending.append((entry, signature))
 
     @property
@@ -497,7 +534,7 @@ class IndexWriter:
             return
         found = self._find(list(latest))
         drops = np.array([loc for loc in found if loc is not None], np.int64).reshape(-1, 2)
-        piece = _piece(list(latest.values()), signature_length(self.params))
+        piece = _piece(list(latest.values()), self.params)
         self._write([piece], len(latest), drops, len(self.segments))
         self._pending.clear()
         if self.merge:
@@ -541,7 +578,8 @@ class IndexWriter:
         path = self.path / info.file
         try:
             width, curvature = signature_length(self.params), curvature_slice(self.params)
-            write_segment(path, info.id, width, rows, pieces, drops, curvature)
+            slots = cell_slots(self.params)
+            write_segment(path, info.id, width, rows, pieces, drops, curvature, slots)
             _fsync(path)
             info = replace(info, crc32=file_crc(path))
             ids, dropped = np.unique(drops[:, 0] if new else [], return_counts=True)
@@ -750,11 +788,18 @@ def _dead_rows(
     return dead
 
 
-def _piece(records: list[tuple[Entry, Signature]], width: int) -> Piece:
-    """The rows of some records, as `write_segment` takes them."""
+def _piece(records: list[tuple[Entry, Signature]], params: Params) -> Piece:
+    """The rows of some records made with ``params``, as `write_segment` takes them."""
     sigs = [s for _, s in records]
+    width, slots = signature_length(params), cell_slots(params)
     phi = np.array([s.phi_range for s in sigs], np.float64).reshape(-1, 2)
+    held = [s.cells for s in sigs if s.cells is not None]  # all of them or none (`add`)
+    cells = {}
+    if slots is not None:
+        for i, (key, dtype) in enumerate(CELLS.items()):
+            cells[key] = np.array([c[i] for c in held], dtype).reshape(-1, slots)
     return {
+        **cells,
         "signatures": np.array([s.vector for s in sigs], np.float32).reshape(-1, width),
         "names": np.array([e.name for e, _ in records], object),
         "labels": np.array([e.label for e, _ in records], object),
@@ -946,6 +991,19 @@ def _read_sketch(f: h5py.File, path: Path) -> Sketch | None:
     if not ok:
         raise IndexFileError(f"{path}: its sketches do not match its signatures")
     return Sketch(f["sketch"], groups.astype(np.int64), center.astype(np.float64), float(error[0]))
+
+
+def _read_cells(
+    f: h5py.File, path: Path, slots: int | None
+) -> tuple[h5py.Dataset, h5py.Dataset] | None:
+    """A segment's fine curvature cells and fractions, for parameters that keep ``slots`` of
+    them a row (None: none); checks that they are there, in shapes that fit its signatures."""
+    if slots is None:
+        return None
+    shape = (f["signatures"].shape[0], slots)
+    if any(key not in f or f[key].shape != shape for key in CELLS):
+        raise IndexFileError(f"{path}: its fine curvature cells are missing or do not fit")
+    return f["cells"], f["cell_fractions"]
 
 
 def _read_curvature(f: h5py.File, path: Path) -> ColumnCopy | None:

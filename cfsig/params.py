@@ -6,8 +6,11 @@ import json
 from dataclasses import asdict, dataclass, fields, replace
 
 DESCRIPTORS = ("cf", "cfhks")
-# The versions of each descriptor, the last one the default (docs/descriptors.md).
-VERSIONS = {"cf": (1,), "cfhks": (1, 2, 3, 4, 5, 6, 7, 8, 9)}
+# The versions of each descriptor (docs/descriptors.md), and the one made by default: cfhks
+# version 10 adds fine curvature cells for partial queries to version 9's vector, at a cost in
+# disk and in partial queries over large indexes (docs/partial.md), so it is asked for by name.
+VERSIONS = {"cf": (1,), "cfhks": (1, 2, 3, 4, 5, 6, 7, 8, 9, 10)}
+DEFAULT_VERSIONS = {"cf": 1, "cfhks": 9}
 REPAIR_MODES = ("auto", "off", "proxy")
 # The length of the cfhks vector per version, `cfsig.cfhks.DESIGNS[version].length`
 # (tests/test_cfhks.py checks that the two agree), here so that an index needs no SciPy.
@@ -21,10 +24,18 @@ CFHKS_LENGTHS = {
     7: 60 + 64 * 8 + 49 * 4,
     8: 45 + 64 * 8 + 49 * 4,
     9: 45 + 64 * 8 + 3 * 17 * 5,
+    10: 45 + 64 * 8 + 3 * 17 * 5,
 }
 # The width of its curvature channel, the vector's last columns (`cfsig.cfhks.channel_columns`),
 # for the versions that have one.
-CFHKS_CURVATURE = {3: 48 * 4, 4: 48 * 4, 5: 49 * 4, 6: 49 * 4, 7: 49 * 4, 8: 49 * 4, 9: 3 * 17 * 5}
+CFHKS_CURVATURE = {
+    **dict.fromkeys((3, 4), 48 * 4),
+    **dict.fromkeys((5, 6, 7, 8), 49 * 4),
+    **dict.fromkeys((9, 10), 3 * 17 * 5),
+}
+# The fine curvature cells kept per row beside the vector, `cfsig.cells.SLOTS`, by the versions
+# that keep them (`cfsig.cfhks.Design.fine`).
+CFHKS_CELLS = {10: 1024}
 SOLVERS = ("auto", "cholmod", "eigen", "scipy")  # sparse solver backends (`cfsig.conformal`)
 
 
@@ -92,7 +103,7 @@ class Params:
             )
         versions = VERSIONS[self.descriptor]
         if self.version is None:
-            object.__setattr__(self, "version", versions[-1])  # frozen: set once, here
+            object.__setattr__(self, "version", DEFAULT_VERSIONS[self.descriptor])  # frozen
         elif self.version not in versions:
             raise ValueError(
                 f"{self.descriptor} has no version {self.version}; this cfsig computes "
@@ -100,7 +111,7 @@ class Params:
             )
 
     def with_descriptor(self, descriptor: str) -> Params:
-        """The same parameters for ``descriptor``, at its latest version when it is another one.
+        """The same parameters for ``descriptor``, at its default version when it is another one.
 
         Parameters
         ----------
@@ -180,3 +191,20 @@ def curvature_slice(params: Params) -> slice | None:
         return None
     length = signature_length(params)
     return slice(length - width, length)
+
+
+def cell_slots(params: Params) -> int | None:
+    """How many fine curvature cells the signatures that ``params`` make keep per row.
+
+    Parameters
+    ----------
+    params : Params
+        Signature parameters.
+
+    Returns
+    -------
+    slots : int or None
+        `cfsig.cells.SLOTS` for ``cfhks`` version 10 and later; None for descriptors that keep
+        none.
+    """
+    return CFHKS_CELLS.get(params.version or 0) if params.descriptor == "cfhks" else None

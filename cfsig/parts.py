@@ -18,10 +18,12 @@ Only ``cfhks`` version 3 and later store the curvature channel (docs/method.md).
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
 
+from .cells import cell_histogram, cell_scores
 from .cfhks import DESIGNS, Design, curvature_histograms, weigh_curvature
 from .conformal import Operators, operators
 from .curvature import smoothed_curvature
@@ -33,10 +35,66 @@ from .params import Params, curvature_slice
 from .simplify import simplified_mesh
 
 SHARES = tuple(2.0 ** (-j / 2) for j in range(7))  # a part's area over its whole's: 1 to 1/8
+# The shares at which a part's fine cells are measured (`Part.cells`): a fine histogram moves by
+# whole cells when the share is off by a factor sqrt(2), so twice as many, a factor 2^(1/4)
+# apart, of which `SHARES` are every other one (docs/partial.md, "Four scales jointly").
+FINE_SHARES = tuple(2.0 ** (-j / 4) for j in range(13))
 # The L1 distance's weight beside the unexplained share in `partial_scores`: chosen on SHREC 2007
 # alone, the best mean NN of its three kinds of parts (docs/partial.md, "The partial distance's
 # weight").
 HISTOGRAM_WEIGHT = 1.0
+_CELL_BLOCK_ROWS = 1024  # rows of fine cells scored at a time: bounds a search's memory
+
+
+@dataclass(frozen=True)
+class Part:
+    """A part measured with an index's parameters, as a partial query compares it.
+
+    Attributes
+    ----------
+    vectors : (len(SHARES), columns) float64 or None
+        `partial_vectors`: the curvature channel at each share, for the versions without fine
+        cells; None for the others.
+    cells : tuple of (cells, fractions), or None
+        For the versions that keep fine cells (`cfsig.params.cell_slots`), the part's
+        `cfsig.cells.cell_histogram` of all its scales at each share of `FINE_SHARES`: cells
+        (c,) int64 ascending, fractions (c,) float64 summing to 1; None for the others.
+    """
+
+    vectors: np.ndarray | None = None
+    cells: tuple[tuple[np.ndarray, np.ndarray], ...] | None = None
+
+
+def measure_part(mesh: Mesh, params: Params) -> Part:
+    """Measure a part as a partial query against an index of ``params`` compares it.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The part; its boundary may be open.
+    params : Params
+        The index's parameters.
+
+    Returns
+    -------
+    part : Part
+        Its fine cells at `FINE_SHARES` when ``params`` keep fine cells, else its
+        `partial_vectors`.
+
+    Raises
+    ------
+    PartialError
+        As `curvature_columns`.
+    SolverError
+        A curvature diffusion failed.
+    """
+    curvature_columns(params)
+    assert params.version is not None  # checked by curvature_columns
+    fine = DESIGNS[params.version].fine
+    if fine is None:
+        return Part(vectors=partial_vectors(mesh, params))
+    measured = share_curvatures(mesh, params, FINE_SHARES)
+    return Part(cells=tuple(cell_histogram(v, a, *fine) for v, a in measured))
 
 
 def curvature_columns(params: Params) -> slice:
@@ -166,17 +224,15 @@ def _share_values(
     return [(values[:, i], ops.vertex_area) for i in range(len(shares))]
 
 
-def partial_search(
-    reader: IndexReader, vectors: np.ndarray, k: int = 20
-) -> tuple[list[Hit], float]:
+def partial_search(reader: IndexReader, part: Part, k: int = 20) -> tuple[list[Hit], float]:
     """The whole shapes related to a part: the nearest by its curvature, then its relatives.
 
     Parameters
     ----------
     reader : IndexReader
         An open index of ``cfhks`` version 3 or later.
-    vectors : (len(SHARES), columns) float
-        `partial_vectors` of the part, made with the index's parameters.
+    part : Part
+        The part, measured with the index's parameters (`measure_part`).
     k : int
         Results.
 
@@ -194,21 +250,49 @@ def partial_search(
         As `curvature_columns`.
     """
     columns = curvature_columns(reader.params)
-    score = partial(partial_scores, mass=float(vectors[0].sum()))
-    rows, dists = nearest(reader, share_queries(vectors), 1, columns, score)
-    if rows.size == 0:
+    if part.cells is not None:
+        found = _nearest_by_cells(reader, part.cells)
+    else:
+        assert part.vectors is not None  # a Part holds one or the other
+        score = partial(partial_scores, mass=float(part.vectors[0].sum()))
+        rows, dists = nearest(reader, share_queries(part.vectors), 1, columns, score)
+        found = (int(rows[0, 0]), float(dists[0, 0])) if rows.size else None
+    if found is None:
         return [], float("nan")
-    first = int(rows[0, 0])
+    first, fit = found
     near, near_dists = nearest(reader, reader.signatures[np.array([first])], k)
     others = [(int(r), float(d)) for r, d in zip(near[0], near_dists[0], strict=True) if r != first]
     ranked = [(first, 0.0), *others][:k]
     entries = reader.entries(np.array([r for r, _ in ranked]))
     hits = [Hit(i + 1, d, e) for i, ((_, d), e) in enumerate(zip(ranked, entries, strict=True))]
-    return hits, float(dists[0, 0])
+    return hits, fit
 
 
-def partial_file(path: str | os.PathLike, params: Params) -> np.ndarray:
-    """Read a part from a file and make its `partial_vectors`.
+def _nearest_by_cells(
+    reader: IndexReader, cells: tuple[tuple[np.ndarray, np.ndarray], ...]
+) -> tuple[int, float] | None:
+    """The row of the smallest partial distance by fine cells, and that distance; the first
+    such row on ties; None for an empty index. Reads every live row's cells, block by block."""
+    best: tuple[float, int] | None = None
+    for view in reader.segments:
+        if view.cells is None:
+            raise PartialError(f"{reader.path}: a segment of this index has no fine cells")
+        stored, fractions = view.cells
+        for start in range(0, stored.shape[0], _CELL_BLOCK_ROWS):
+            stop = min(start + _CELL_BLOCK_ROWS, stored.shape[0])
+            scores = cell_scores(cells, FINE_SHARES, stored[start:stop], fractions[start:stop])
+            dead = view.dead[(view.dead >= start) & (view.dead < stop)] - start
+            scores[dead] = np.inf
+            at = int(np.argmin(scores))
+            if np.isfinite(scores[at]) and (best is None or scores[at] < best[0]):
+                best = float(scores[at]), view.start + start + at
+    if best is None:
+        return None
+    return int(reader.logical_rows(np.array([best[1]]))[0]), best[0]
+
+
+def partial_file(path: str | os.PathLike, params: Params) -> Part:
+    """Read a part from a file and measure it (`measure_part`).
 
     The part goes through no repair stage: its cuts and holes are what it is.
 
@@ -221,7 +305,7 @@ def partial_file(path: str | os.PathLike, params: Params) -> np.ndarray:
 
     Returns
     -------
-    vectors : (len(SHARES), columns) float64
+    part : Part
 
     Raises
     ------
@@ -233,31 +317,49 @@ def partial_file(path: str | os.PathLike, params: Params) -> np.ndarray:
     curvature_columns(params)
     mesh = read_mesh(path)
     try:
-        return partial_vectors(mesh, params)
+        return measure_part(mesh, params)
     except SolverError as exc:
         raise MeshError(f"{path}: {exc}") from None
 
 
-def partial_distances(vectors: np.ndarray, signatures: np.ndarray, params: Params) -> np.ndarray:
+def partial_distances(
+    part: Part,
+    signatures: np.ndarray,
+    params: Params,
+    cells: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
     """The partial distance of a part to every whole of a collection held in memory.
 
     Parameters
     ----------
-    vectors : (len(SHARES), columns) float
-        `partial_vectors` of the part.
+    part : Part
+        The part, measured with ``params`` (`measure_part`).
     signatures : (N, length) float
         The wholes' signatures, made with ``params``.
     params : Params
         Their parameters.
+    cells : ((N, slots) uint16, (N, slots) float32), optional
+        The wholes' fine cells and fractions (`cfsig.signature.Signature.cells`), needed when
+        ``params`` keep them.
 
     Returns
     -------
     distances : (N,) float64
-        `partial_scores` of the wholes.
+        `partial_scores` of the wholes, or by their fine cells `cfsig.cells.cell_scores`.
+
+    Raises
+    ------
+    ValueError
+        The part has fine cells and ``cells`` is None.
     """
+    if part.cells is not None:
+        if cells is None:
+            raise ValueError("a part measured by fine cells needs the wholes' cells")
+        return cell_scores(part.cells, FINE_SHARES, *cells)
+    assert part.vectors is not None  # a Part holds one or the other
     stored = np.asarray(signatures, np.float32)[:, curvature_columns(params)]
-    distances = l1_distances(share_queries(vectors), stored)
-    return partial_scores(distances, float(vectors[0].sum()))
+    distances = l1_distances(share_queries(part.vectors), stored)
+    return partial_scores(distances, float(part.vectors[0].sum()))
 
 
 def share_queries(vectors: np.ndarray) -> np.ndarray:
@@ -309,17 +411,24 @@ def partial_scores(
     return (unexplained + weight * plain / mass).min(axis=0)
 
 
-def expanded_distances(vectors: np.ndarray, signatures: np.ndarray, params: Params) -> np.ndarray:
+def expanded_distances(
+    part: Part,
+    signatures: np.ndarray,
+    params: Params,
+    cells: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
     """Distances that rank a collection held in memory as `partial_search` ranks an index.
 
     Parameters
     ----------
-    vectors : (len(SHARES), columns) float
-        `partial_vectors` of the part.
+    part : Part
+        The part, measured with ``params`` (`measure_part`).
     signatures : (N, length) float
         The wholes' signatures, made with ``params``.
     params : Params
         Their parameters.
+    cells : ((N, slots) uint16, (N, slots) float32), optional
+        As `partial_distances`.
 
     Returns
     -------
@@ -327,7 +436,7 @@ def expanded_distances(vectors: np.ndarray, signatures: np.ndarray, params: Para
         -1 for the nearest whole by partial distance, the whole-shape distance to it for the
         others.
     """
-    first = int(np.argmin(partial_distances(vectors, signatures, params)))
+    first = int(np.argmin(partial_distances(part, signatures, params, cells)))
     distances = l1_distances(signatures[first : first + 1], signatures)[0]
     distances[first] = -1.0
     return distances

@@ -33,6 +33,9 @@ META = {
 }
 TEXT = ("names", "labels", "paths")
 COLUMNS = (*TEXT, "sha256", *META)  # the columns of a row besides its signature
+# The fine curvature cells of a row (`cfsig.cells.packed_cells`), (rows, slots) each, in the
+# segments of a descriptor that keeps them (`cfsig.params.cell_slots`).
+CELLS = {"cells": np.uint16, "cell_fractions": np.float32}
 _DTYPES = {**{k: STRING for k in TEXT}, "sha256": "S64", **META}
 _CHUNK_ROWS = 4096  # rows per chunk of signatures, each with its CRC-32
 _PIECE_CHUNKS = 16  # chunks copied at a time by a merge: bounds its memory
@@ -40,7 +43,8 @@ _SKETCH_CHUNK_ROWS = 65536  # rows per chunk of sketches (8.9 MB at 34 float32):
 _EXTRA = ("key_sorted", "key_rows", "drops", "signature_crc32")
 SKETCH_EXTRA = ("sketch_groups", "sketch_center", "sketch_error")  # with the dataset `sketch`
 CURVATURE_EXTRA = ("curvature_columns",)  # with the dataset `curvature`
-Piece = dict[str, np.ndarray]  # "signatures" (m, length) float32 and every column (m,)
+# "signatures" (m, length) float32, every column (m,), and the CELLS (m, slots) if kept
+Piece = dict[str, np.ndarray]
 
 
 def name_keys(names: Iterable[str]) -> np.ndarray:
@@ -107,6 +111,7 @@ def write_segment(
     pieces: Iterable[Piece],
     drops: np.ndarray,
     curvature: slice | None = None,
+    cells: int | None = None,
 ) -> None:
     """Write a segment file from pieces of rows, with the keys of its names, sketches, checksums.
 
@@ -131,6 +136,9 @@ def write_segment(
     curvature : slice, optional
         The curvature channel's columns (`cfsig.params.curvature_slice`): stored again as the
         dataset ``curvature``, (rows, their number) float32, in chunks of the signatures' rows.
+    cells : int, optional
+        Fine curvature cells per row (`cfsig.params.cell_slots`): the pieces hold `CELLS`,
+        stored as (rows, cells) datasets in chunks of the signatures' rows.
 
     Raises
     ------
@@ -148,7 +156,12 @@ def write_segment(
         sketch_chunk = (min(_SKETCH_CHUNK_ROWS, rows), len(groups)) if rows else None
         sketches = f.create_dataset("sketch", (rows, len(groups)), np.float32, chunks=sketch_chunk)
         columns = {k: f.create_dataset(k, (rows,), _DTYPES[k]) for k in COLUMNS}
-        crcs = dict.fromkeys((*COLUMNS, "sketch"), 0)
+        if cells is not None:
+            for key, dtype in CELLS.items():
+                columns[key] = f.create_dataset(
+                    key, (rows, cells), dtype, chunks=(chunk, cells) if rows else None
+                )
+        crcs = dict.fromkeys((*columns, "sketch"), 0)
         if curvature is not None:
             first, last, _ = curvature.indices(width)
             copy = f.create_dataset(
@@ -174,7 +187,7 @@ def write_segment(
                 values32 = rows32[:, curvature]
                 copy[start:stop] = values32
                 crcs["curvature"] = column_crc(values32, crcs["curvature"])
-            for key in COLUMNS:
+            for key in columns:
                 values = np.asarray(piece[key], dtype=columns[key].dtype)
                 columns[key][start:stop] = values
                 crcs[key] = column_crc(values, crcs[key])
@@ -234,13 +247,14 @@ def scan_segment(
     step = chunk * _PIECE_CHUNKS
     want = f["signature_crc32"][:] if verify else None
     derived = [k for k in ("sketch", "curvature") if k in f]
-    crcs = dict.fromkeys((*COLUMNS, *derived), 0)
+    stored = (*COLUMNS, *(k for k in CELLS if k in f))
+    crcs = dict.fromkeys((*stored, *derived), 0)
     for start in range(0, n, step):
         stop = min(start + step, n)
         for key in derived:  # checked, not yielded: a new segment computes its own
             crcs[key] = column_crc(f[key][start:stop], crcs[key])
         piece = {"signatures": sigs[start:stop]}
-        for key in COLUMNS:
+        for key in stored:
             piece[key] = f[key][start:stop]  # strings as bytes: checked before they are decoded
             crcs[key] = column_crc(piece[key], crcs[key])
             if piece[key].dtype.kind == "O":  # a damaged one is reported by its checksum below

@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .cells import Cells
 from .cfhks import cfhks_vector, copy_vector, solves_phi
 from .conformal import ConformalFactor, Operators, conformal_factor, mesh_components, operators
 from .errors import MeshError, SolverError
@@ -48,6 +49,9 @@ class Signature:
         Wall time from reading to histogram.
     sha256 : str
         Hash of the file's bytes ("" for an in-memory mesh).
+    cells : Cells or None
+        The fine curvature cells kept beside the vector for partial queries
+        (`cfsig.cells.packed_cells`), by ``cfhks`` version 10 and later; None otherwise.
     """
 
     vector: np.ndarray
@@ -60,6 +64,7 @@ class Signature:
     route: str
     seconds: float
     sha256: str = ""
+    cells: Cells | None = None
 
     @property
     def phi_range(self) -> tuple[float, float]:
@@ -191,6 +196,13 @@ def signature_of(
     ValueError
         ``cf`` is None and `needs_phi`.
     """
+    return _vector_and_cells(mesh, ops, params, cf, solver)[0]
+
+
+def _vector_and_cells(
+    mesh: Mesh, ops: Operators, params: Params, cf: ConformalFactor | None, solver: str
+) -> tuple[np.ndarray, Cells | None]:
+    """`signature_of`, and the fine cells of the ``cfhks`` versions that keep them."""
     if params.descriptor == "cfhks":
         assert params.version is not None  # resolved by Params.__post_init__
         return cfhks_vector(mesh, ops, params.version, cf, solver)
@@ -204,7 +216,7 @@ def signature_of(
     samples = sample_phi(
         faces, ops.face_areas, phi, params.samples_per_face * len(faces), params.seed
     )
-    return histogram(np.concatenate([samples, phi]), params)
+    return histogram(np.concatenate([samples, phi]), params), None
 
 
 def compute_signature(
@@ -251,17 +263,17 @@ def _repair_and_sign(
     start = time.perf_counter()
     mesh = repair_mesh(mesh, params.repair, limits)
     cf = conformal_factor(mesh, params.mollify, solver) if phi or needs_phi(params) else None
-    ops, vector, repairs = None, None, mesh.repairs
+    ops, found, repairs = None, None, mesh.repairs
     if cf is None and params.descriptor == "cfhks":
         assert params.version is not None  # resolved by Params.__post_init__
-        vector = copy_vector(mesh, params.version, solver)  # no need for the mesh's operators
-    if vector is None:
+        found = copy_vector(mesh, params.version, solver)  # no need for the mesh's operators
+    if found is None:
         ops = operators(mesh, params.mollify) if cf is None else cf.operators
-        vector = signature_of(mesh, ops, params, cf, solver)
+        found = _vector_and_cells(mesh, ops, params, cf, solver)
         if ops.mollified > 0:
             repairs += (f"mollified degenerate triangles (edges +{ops.mollified:.3g})",)
     return mesh, Signature(
-        vector,
+        found[0],
         None if cf is None else cf.phi,
         len(mesh.vertices),
         len(mesh.faces),
@@ -270,6 +282,7 @@ def _repair_and_sign(
         repairs,
         mesh.route,
         time.perf_counter() - start,
+        cells=found[1],
     )
 
 

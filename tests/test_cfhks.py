@@ -12,7 +12,7 @@ from cfsig.curvature import smoothed_curvature
 from cfsig.errors import SolverError
 from cfsig.index import IndexReader, IndexWriter, check_index
 from cfsig.mesh import clean_mesh
-from cfsig.params import VERSIONS, Params, curvature_slice, signature_length
+from cfsig.params import DEFAULT_VERSIONS, VERSIONS, Params, curvature_slice, signature_length
 from cfsig.signature import compute_signature, needs_phi
 from tests.helpers import (
     disk,
@@ -64,7 +64,8 @@ def test_length_and_channels(version):
 
 
 def test_versions():
-    assert CFHKS.version == max(VERSIONS["cfhks"]) and Params().version == 1
+    assert CFHKS.version == DEFAULT_VERSIONS["cfhks"] == 9 and Params().version == 1
+    assert max(VERSIONS["cfhks"]) == 10  # asked for by name (cfsig.params)
     with pytest.raises(ValueError, match="cf has no version 2"):
         Params(descriptor="cf", version=2)
     old = json.loads(Params(descriptor="cfhks", version=1).to_json())
@@ -313,7 +314,10 @@ def test_a_copy_only_version_needs_not_the_mesh_operators_and_counts_its_compone
     sig = compute_signature(mesh, Params(descriptor="cfhks", version=version, repair="off"))
     ops = operators(mesh)
     assert sig.n_components == ops.n_components == 2
-    assert np.array_equal(sig.vector, cfhks.cfhks_vector(mesh, ops, version))
+    vector, cells = cfhks.cfhks_vector(mesh, ops, version)
+    assert np.array_equal(sig.vector, vector)
+    assert sig.cells is not None and cells is not None  # version 10 keeps fine cells
+    assert all(np.array_equal(a, b) for a, b in zip(sig.cells, cells, strict=True))
     assert cfhks.copy_vector(mesh, 6) is None  # version 6's curvature is on the mesh itself
     small = clean_mesh(*_bumpy())
     assert cfhks.copy_vector(small, version) is None  # nothing to simplify

@@ -97,9 +97,10 @@ def test_evaluate_queries_by_hand():
         evaluate_queries(distances, ["c", "c"], ["a", "a", "b"])
 
 
-@pytest.fixture(scope="module")
-def wholes(tmp_path_factory):
-    """An index of four kinds of whole shape, two of each, and parts cut from them."""
+@pytest.fixture(scope="module", params=[9, 10])
+def wholes(request, tmp_path_factory):
+    """An index of four kinds of whole shape, two of each, and parts cut from them: of version
+    9 (partial queries by the curvature channel) and 10 (by the fine cells)."""
     root = tmp_path_factory.mktemp("parts")
     shapes = {
         "torus": torus(),
@@ -114,7 +115,8 @@ def wholes(tmp_path_factory):
         v, f = shapes[name]
         write_off(root / "parts" / name / "cut.off", *_cut(v, f, 0.3))
     index = root / "index"
-    result = CliRunner().invoke(main, ["index", str(root / "wholes"), "-o", str(index)])
+    version = ["--descriptor-version", str(request.param)]
+    result = CliRunner().invoke(main, ["index", str(root / "wholes"), "-o", str(index), *version])
     assert result.exit_code == 0, result.output
     return root, index
 
@@ -167,9 +169,9 @@ def test_partial_search_scores_as_partial_distances(wholes):
     with IndexReader(index) as reader:
         signatures = reader.signatures[:]
         for name in ("torus", "bumpy"):
-            vectors = partial_file(root / "parts" / name / "cut.off", reader.params)
-            hits, distance = partial_search(reader, vectors, 3)
-            in_memory = partial_distances(vectors, signatures, reader.params)
+            part = partial_file(root / "parts" / name / "cut.off", reader.params)
+            hits, distance = partial_search(reader, part, 3)
+            in_memory = partial_distances(part, signatures, reader.params, reader.cells())
             assert hits[0].entry.label == name
             assert distance == pytest.approx(in_memory.min(), rel=1e-5)
 

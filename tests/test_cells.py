@@ -1,0 +1,167 @@
+"""Fine curvature cells (cfsig.cells): the histograms, their scores, version 10's signatures and
+their storage in an index."""
+
+from dataclasses import replace
+
+import h5py
+import numpy as np
+import pytest
+
+from cfsig.cells import SLOTS, cell_histogram, cell_scores, packed_cells, window_cells
+from cfsig.cfhks import DESIGNS, curvature_histograms
+from cfsig.errors import IndexFileError
+from cfsig.index import Entry, IndexReader, IndexWriter, check_index
+from cfsig.mesh import clean_mesh
+from cfsig.params import Params, cell_slots, signature_length
+from cfsig.parts import FINE_SHARES, measure_part
+from cfsig.signature import compute_signature
+from tests.helpers import random_signature, torus
+
+V10 = Params(descriptor="cfhks", version=10)
+
+
+def _values(n, seed=0):
+    """Curvature-like values at four scales, smooth from one scale to the next."""
+    rng = np.random.default_rng(seed)
+    first = rng.normal(0, 20, n)
+    return np.cumsum(np.column_stack([first, rng.normal(0, 3, (n, 3))]), axis=1)
+
+
+def test_pairs_of_scales_are_version_9s_joint_histograms():
+    values, areas = _values(500), np.random.default_rng(1).random(500)
+    cells, fractions = cell_histogram(values, areas, 17, 2, joint=2)
+    dense = curvature_histograms(values, areas, 17, 2).ravel() / 3  # three windows of mass 1/3
+    assert np.array_equal(cells, np.flatnonzero(dense)) and np.allclose(fractions, dense[cells])
+
+
+def test_all_scales_jointly_one_cell_per_vertex():
+    values = _values(300)
+    cells = window_cells(values, 33, 4, 4)
+    assert cells.shape == (300, 1) and cells.min() >= 0 and cells.max() < 33 * 9**3
+    moved = values.copy()
+    moved[:, 3] += 1000.0  # a far step to the last scale is clipped, not wrapped
+    steps = window_cells(moved, 33, 4, 4)[:, 0] % 9
+    assert np.all(steps <= 8)
+
+
+def test_packed_cells_keep_the_largest_in_fixed_width():
+    values, areas = _values(2000), np.random.default_rng(2).random(2000)
+    cells, fractions = cell_histogram(values, areas, 33, 4)
+    packed, packed_fractions = packed_cells(values, areas, 33, 4, slots=len(cells) // 2)
+    assert packed.dtype == np.uint16 and packed_fractions.dtype == np.float32
+    assert np.all(np.diff(packed.astype(int)) > 0)
+    kept = np.isin(cells, packed)
+    assert fractions[kept].min() >= fractions[~kept].max()
+    wide, wide_fractions = packed_cells(values, areas, 33, 4, slots=len(cells) + 5)
+    assert np.array_equal(wide[: len(cells)], cells) and not wide_fractions[len(cells) :].any()
+    assert wide_fractions.sum() == pytest.approx(1.0, rel=1e-6)
+
+
+def _dense_scores(part, shares, cells, fractions, size):
+    """The partial distance written out on dense histograms."""
+    wholes = np.zeros((len(cells), size))
+    for row, (c, w) in enumerate(zip(cells, fractions, strict=True)):
+        np.add.at(wholes[row], c, w)
+    out = []
+    for share, (c, p) in zip(shares, part, strict=True):
+        dense = np.zeros(size)
+        dense[c] = p
+        unexplained = np.maximum(share * dense - wholes, 0).sum(axis=1) / share
+        out.append(unexplained + np.abs(dense - wholes).sum(axis=1))
+    return np.min(out, axis=0)
+
+
+def test_cell_scores_are_the_partial_distance():
+    rng = np.random.default_rng(3)
+    size, shares = 60, (1.0, 0.5, 0.25)
+
+    def histogram(count):
+        c = np.sort(rng.choice(size, count, replace=False))
+        w = rng.random(count)
+        return c, w / w.sum()
+
+    part = [histogram(10) for _ in shares]
+    wholes = [histogram(25) for _ in range(6)]
+    cells = np.zeros((6, 32), np.uint16)
+    fractions = np.zeros((6, 32), np.float32)
+    for row, (c, w) in enumerate(wholes):
+        cells[row, : len(c)], fractions[row, : len(c)] = c, w
+    got = cell_scores(part, shares, cells, fractions)
+    assert np.allclose(got, _dense_scores(part, shares, cells, fractions, size), atol=1e-6)
+    same = cell_scores([(c, w) for c, w in [wholes[2]]], (1.0,), cells[2:3], fractions[2:3])
+    assert same[0] == pytest.approx(0.0, abs=1e-6)  # a whole is its own part at share 1
+
+
+def test_version_10_is_version_9s_vector_with_cells():
+    mesh = clean_mesh(*torus())
+    sig = compute_signature(mesh, V10)
+    assert np.array_equal(sig.vector, compute_signature(mesh, replace(V10, version=9)).vector)
+    assert compute_signature(mesh, replace(V10, version=9)).cells is None
+    cells, fractions = sig.cells
+    assert cells.shape == fractions.shape == (SLOTS,) == (cell_slots(V10),)
+    assert fractions.sum() == pytest.approx(1.0, rel=1e-5) and (fractions > 0).sum() > 1
+    # The whole measured as a part at share 1 finds the same cells.
+    ((part_cells, part_fractions), *_) = measure_part(mesh, V10).cells
+    assert FINE_SHARES[0] == 1.0 and len(measure_part(mesh, V10).cells) == len(FINE_SHARES)
+    used = fractions > 0
+    assert np.array_equal(part_cells, cells[used])
+    assert np.allclose(part_fractions, fractions[used], rtol=1e-5)
+    assert DESIGNS[10].fine == (33, 4)
+
+
+def _signature(seed):
+    """A version 10 signature of random values with random cells."""
+    rng = np.random.default_rng(seed)
+    cells = np.zeros(SLOTS, np.uint16)
+    fractions = np.zeros(SLOTS, np.float32)
+    count = int(rng.integers(1, 50))
+    cells[:count] = np.sort(rng.choice(30000, count, replace=False))
+    fractions[:count] = rng.random(count)
+    vector = random_signature(seed, signature_length(V10)).vector
+    return replace(random_signature(seed), vector=vector, cells=(cells, fractions))
+
+
+def test_an_index_keeps_the_cells_through_merges(tmp_path):
+    index, want = tmp_path / "i", {}
+    with IndexWriter(index, V10) as w:
+        for commit in range(3):
+            for i in range(5):
+                name = f"c{i % 2}/{(commit * 3 + i) % 8}.off"  # some names again: superseded
+                sig = _signature(100 * commit + i)
+                w.add(Entry(name, name[:2], f"/d/{name}"), sig)
+                want[name] = sig.cells
+            w.commit()
+        assert len(w.segments) > 1
+        with pytest.raises(ValueError, match="x/y.off: no fine cells"):
+            w.add(Entry("x/y.off", "x", "/x/y.off"), random_signature(0, signature_length(V10)))
+    for compacted in (False, True):
+        if compacted:
+            with IndexWriter(index, V10) as w:
+                w.compact()
+                assert len(w.segments) == 1
+        with IndexReader(index) as r:
+            cells, fractions = r.cells()
+            names = list(r.column("names"))
+        assert sorted(names) == sorted(want)
+        for row, name in enumerate(names):
+            assert np.array_equal(cells[row], want[name][0])
+            assert np.array_equal(fractions[row], want[name][1])
+    assert check_index(index) == []
+
+
+def test_damaged_or_missing_cells_are_named(tmp_path):
+    index = tmp_path / "i"
+    with IndexWriter(index, V10) as w:
+        for i in range(4):
+            w.add(Entry(f"c/{i}.off", "c", f"/c/{i}.off"), _signature(i))
+    (segment,) = index.glob("seg-*.h5")
+    with h5py.File(segment, "r") as f:
+        offset = f["cell_fractions"].id.get_chunk_info(0).byte_offset + 4
+    data = bytearray(segment.read_bytes())
+    data[offset] ^= 0xFF
+    segment.write_bytes(bytes(data))
+    assert any("column cell_fractions: checksum mismatch" in p for p in check_index(index))
+    with h5py.File(segment, "a") as f:
+        del f["cells"]
+    with pytest.raises(IndexFileError, match="fine curvature cells are missing"):
+        IndexReader(index)
