@@ -51,21 +51,17 @@ import numpy as np
 from descriptors import collection_paths
 from partial import COLLECTIONS, KINDS, cut, holes, scan
 
-from cfsig.cfhks import curvature_bins
+from cfsig.cells import cell_histogram
 from cfsig.measures import evaluate_queries
 from cfsig.mesh import read_mesh
 from cfsig.nearest import l1_distances
 from cfsig.params import Params
-from cfsig.parts import SHARES, share_curvatures
+from cfsig.parts import FINE_SHARES, SHARES, share_curvatures
 from cfsig.repair import repair_mesh
 from cfsig.signature import compute_signature
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = Params(descriptor="cfhks", version=9)
-# A part is measured at each share of a grid (`cfsig.parts.SHARES`, a factor sqrt(2) apart in
-# area) as if its whole were that much larger; a fine histogram may need a finer grid: the
-# shares 2^(-j/4), whose even ones are the 7 of `SHARES`.
-FINE_SHARES = tuple(2.0 ** (-j / 4) for j in range(13))
 # (name, B, D, scales jointly, shares): version 9's adjacent pairs, then all four scales on
 # finer bins; odd B puts zero curvature mid-bin (version 5's reason), D grows with B to cover as
 # much of the axis.
@@ -85,43 +81,10 @@ FEATURES = (
 TITLE = "## Four scales jointly, on finer bins: a study"
 
 
-def cells(values: np.ndarray, bins: int, band: int, joint: int) -> np.ndarray:
-    """The cell of each vertex and window of ``joint`` adjacent scales.
-
-    Parameters
-    ----------
-    values : (n, k) float64
-        Curvature at k scales (`cfsig.curvature.smoothed_curvature`), dimensionless.
-    bins, band : int
-        Bins per axis, and the steps from one scale's bin to the next kept (clipped beyond).
-    joint : int
-        Scales per cell: 2 gives version 9's pairs (k - 1 windows), k one cell per vertex.
-
-    Returns
-    -------
-    cells : (n, k - joint + 1) int64
-        Cell numbers, distinct across windows: ``window * cells_per_window + cell``.
-    """
-    index = curvature_bins(values, bins).astype(np.int64)
-    width = 2 * band + 1
-    windows = index.shape[1] - joint + 1
-    out = np.empty((len(index), windows), np.int64)
-    for w in range(windows):
-        cell = index[:, w]
-        for s in range(w + 1, w + joint):
-            cell = cell * width + np.clip(index[:, s] - index[:, s - 1], -band, band) + band
-        out[:, w] = w * bins * width ** (joint - 1) + cell
-    return out
-
-
 def histogram(values: np.ndarray, areas: np.ndarray, feature: tuple) -> tuple:
-    """A surface's sparse histogram of one feature: (cells, fractions), each window summing to
-    1 / windows so that the whole sums to 1 (as `cfsig.parts.partial_scores` takes mass 1)."""
+    """A surface's sparse histogram of one feature (`cfsig.cells.cell_histogram`)."""
     _, bins, band, joint, _ = feature
-    found = cells(values, bins, band, joint)
-    weights = np.repeat(areas / areas.sum() / found.shape[1], found.shape[1])
-    unique, where = np.unique(found.ravel(), return_inverse=True)
-    return unique, np.bincount(where, weights=weights)
+    return cell_histogram(values, areas, bins, band, joint)
 
 
 def _one(item: tuple[Path, int]) -> dict:
