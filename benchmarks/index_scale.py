@@ -63,16 +63,40 @@ NOISE = 0.02  # noise of a mixed row, in standard deviations of each coordinate 
 K = 20
 
 
-def real_rows(index: str | None) -> np.ndarray | None:
-    """The signatures of a real index, or None for random rows."""
+def real_rows(index: str | None, params: Params = PARAMS) -> np.ndarray | None:
+    """The signatures of a real index of ``params``, or None for random rows."""
     if index is None:
         return None
     from cfsig.index import IndexReader
 
     with IndexReader(index) as reader:
-        if reader.params != PARAMS:
-            raise SystemExit(f"{index}: not an index of {PARAMS.to_json()}")
+        if reader.params != params:
+            raise SystemExit(f"{index}: not an index of {params.to_json()}")
         return reader.signatures[:]
+
+
+def synthetic_cells(
+    rng: np.random.Generator, n: int, real: tuple[np.ndarray, np.ndarray]
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """n rows of fine cells (`cfsig.cells.packed_cells`) from the cells ``real`` of the rows of a
+    real index (`IndexReader.cells`): two real rows' cells, their fractions mixed as
+    `synthetic_rows` mixes vectors, the largest that fit kept."""
+    cells, fractions = real
+    slots = cells.shape[1]
+    i, j = rng.integers(0, len(cells), (2, n))
+    t = rng.random(n)
+    out = []
+    for a, b, share in zip(i, j, t, strict=True):
+        both = np.concatenate([cells[a], cells[b]])
+        mixed = np.concatenate([share * fractions[a], (1 - share) * fractions[b]])
+        held, where = np.unique(both, return_inverse=True)
+        summed = np.bincount(where, weights=mixed)
+        keep = np.sort(np.argsort(-summed, kind="stable")[:slots])
+        keep = keep[summed[keep] > 0]
+        row_cells, row_fractions = np.zeros(slots, np.uint16), np.zeros(slots, np.float32)
+        row_cells[: len(keep)], row_fractions[: len(keep)] = held[keep], summed[keep]
+        out.append((row_cells, row_fractions))
+    return out
 
 
 def synthetic_rows(rng: np.random.Generator, n: int, real: np.ndarray | None) -> np.ndarray:
@@ -103,18 +127,27 @@ def entry(i: int) -> Entry:
     return Entry(f"{label}/{i}.off", label, f"/data/{label}/{i}.off")
 
 
-def build(path: Path, n: int, real: np.ndarray | None) -> float:
-    """Write n synthetic rows in commits of BUILD_ROWS; return the seconds taken."""
+def build(
+    path: Path,
+    n: int,
+    real: np.ndarray | None,
+    params: Params = PARAMS,
+    cells: tuple[np.ndarray, np.ndarray] | None = None,
+) -> float:
+    """Write n synthetic rows of ``params`` in commits of BUILD_ROWS, with `synthetic_cells` of
+    the real ``cells`` when the parameters keep fine cells; return the seconds taken."""
     from cfsig.signature import Signature
 
     rng = np.random.default_rng(0)
     phi = np.zeros(1)
     start = time.perf_counter()
-    with IndexWriter(path, PARAMS, merge=False) as writer:
+    with IndexWriter(path, params, merge=False) as writer:
         for first in range(0, n, PIECE_ROWS):
             rows = synthetic_rows(rng, min(PIECE_ROWS, n - first), real)
-            for i, vector in enumerate(rows, first):
-                writer.add(entry(i), Signature(vector, phi, 1, 1, 1, 0.0, (), "clean", 0.0, ""))
+            fine = [None] * len(rows) if cells is None else synthetic_cells(rng, len(rows), cells)
+            for i, (vector, held) in enumerate(zip(rows, fine, strict=True), first):
+                sig = Signature(vector, phi, 1, 1, 1, 0.0, (), "clean", 0.0, "", held)
+                writer.add(entry(i), sig)
             if writer.pending >= BUILD_ROWS or first + PIECE_ROWS >= n:
                 writer.commit()
     seconds = time.perf_counter() - start

@@ -366,27 +366,42 @@ def scale(rows: int, real: str, folder: Path) -> str:
     """Seconds of one partial query over ``rows`` synthetic rows, in a fresh process.
 
     The rows are `benchmarks/index_scale.py`'s mixed ones (two real signatures of the index
-    ``real`` blended, plus noise), written by its ``build``; the query's vectors for the seven
-    shares are the curvature columns of seven more such rows. Open, `cfsig.parts.partial_search`
-    for 20 results and their names, once untimed, then three times.
+    ``real`` blended, plus noise), written by its ``build``, of the real index's version. For
+    version 9 the query's vectors for the seven shares are the curvature columns of seven more
+    such rows; for version 10, whose rows also get fine cells mixed from two real rows'
+    (`index_scale.synthetic_cells`), the query's cells at the 13 shares are 13 more such rows'.
+    Open, `cfsig.parts.partial_search` for 20 results and their names, once untimed, then three
+    times.
     """
     sys.path.insert(0, str(ROOT))
     from benchmarks.index_scale import K, build, in_child, real_rows
+    from cfsig.index import IndexReader
 
+    with IndexReader(real) as reader:
+        params, cells = reader.params, reader.cells()
     # Not index_scale.py's name for the same rows: its commit timings add rows to what it reuses.
-    path = folder / f"partial-mixed-{rows}"
-    built = None if (path / "manifest.h5").exists() else build(path, rows, real_rows(real))
+    path = folder / (f"partial-mixed-{rows}" if cells is None else f"partial-fine-{rows}")
+    built = None
+    if not (path / "manifest.h5").exists():
+        built = build(path, rows, real_rows(real, params), params, cells)
     code = f"""
 import numpy as np
 from cfsig.index import IndexReader
-from cfsig.parts import SHARES, Part, curvature_columns, partial_search
-from benchmarks.index_scale import PARAMS, real_rows, synthetic_rows
-rows = synthetic_rows(np.random.default_rng(6), len(SHARES), real_rows({real!r}))
-vectors = rows[:, curvature_columns(PARAMS)]
+from cfsig.parts import FINE_SHARES, SHARES, Part, curvature_columns, partial_search
+from benchmarks.index_scale import real_rows, synthetic_cells, synthetic_rows
+with IndexReader({real!r}) as reader:
+    params, cells = reader.params, reader.cells()
+rng = np.random.default_rng(6)
+if cells is None:
+    rows = synthetic_rows(rng, len(SHARES), real_rows({real!r}, params))
+    part = Part(vectors=rows[:, curvature_columns(params)])
+else:
+    held = synthetic_cells(rng, len(FINE_SHARES), cells)
+    part = Part(cells=tuple((c[f > 0].astype(np.int64), f[f > 0] / f.sum()) for c, f in held))
 def once():
     t = time.perf_counter()
     with IndexReader({str(path)!r}) as r:
-        hits, _ = partial_search(r, Part(vectors=vectors), {K})
+        hits, _ = partial_search(r, part, {K})
     return time.perf_counter() - t
 once()
 out = {{'times': [once() for _ in range(3)]}}
@@ -394,7 +409,7 @@ out = {{'times': [once() for _ in range(3)]}}
     out = in_child(code)
     how = "reused" if built is None else f"built in {built:.0f} s"
     return (
-        f"One partial query over {rows:,} rows ({how}"
+        f"One partial query over {rows:,} rows of version {params.version} ({how}"
         f"): {statistics.median(out['times']):.3f} s (median of 3; "
         + ", ".join(f"{t:.3f}" for t in out["times"])
         + f"), peak {out['peak_mb']:.0f} MB; load average {os.getloadavg()[0]:.1f}."

@@ -27,7 +27,10 @@ bodies with holes (90th percentile and largest): how many candidates a first sta
 9's stored channel would have to keep for the feature to find what it finds alone; and, per
 indexed row, how many entries lists of the rows holding each cell would give for a part's cells
 (the union over its shares; median over the cuts and holes): the work of a search that reads
-such lists instead of every row.
+such lists instead of every row; and how much of that a search pruning by bounds (MaxScore, with
+the part's own smallest partial distance as its threshold: the best any such search can do)
+would still read, and what share of the rows the lists it reads name, which it would then
+have to score.
 
 The ``pairs 17 2`` row is version 9's own channel through the same code, and reproduces the
 ``--partial`` rows of partial.md's tables. The best feature is the one with the best mean NN
@@ -106,17 +109,25 @@ def _one(item: tuple[Path, int]) -> dict:
     return row
 
 
-def _scores(parts: list[list[tuple]], wholes: list[tuple], shares: tuple) -> np.ndarray:
-    """Partial distances (parts, wholes): ``min_f (1 - sum(min(f p, w)) / f) + (2 - 2
-    sum(min(p, w)))``, `cfsig.parts.partial_scores` for histograms of mass 1, from the wholes'
-    histograms laid out densely in the cells any of them occupies."""
+def _dense(wholes: list[tuple]) -> tuple[np.ndarray, np.ndarray]:
+    """The cells any whole occupies, ascending, and the wholes' fractions in them (wholes,
+    cells)."""
     occupied = np.unique(np.concatenate([c for c, _ in wholes]))
     dense = np.zeros((len(wholes), len(occupied)), np.float64)
     for i, (c, w) in enumerate(wholes):
         dense[i, np.searchsorted(occupied, c)] = w
-    out = np.empty((len(parts), len(wholes)))
+    return occupied, dense
+
+
+def _scores(
+    parts: list[list[tuple]], occupied: np.ndarray, dense: np.ndarray, shares: tuple
+) -> np.ndarray:
+    """Partial distances (parts, wholes): ``min_f (1 - sum(min(f p, w)) / f) + (2 - 2
+    sum(min(p, w)))``, `cfsig.parts.partial_scores` for histograms of mass 1, from the wholes'
+    histograms laid out densely (`_dense`)."""
+    out = np.empty((len(parts), len(dense)))
     for i, part in enumerate(parts):
-        best = np.full(len(wholes), np.inf)
+        best = np.full(len(dense), np.inf)
         for share, (c, p) in zip(shares, part, strict=True):
             at, found = _lookup(occupied, c)
             held = dense[:, at[found]]
@@ -125,6 +136,35 @@ def _scores(parts: list[list[tuple]], wholes: list[tuple], shares: tuple) -> np.
             best = np.minimum(best, 1 - scaled / share + 2 - 2 * plain)
         out[i] = best
     return out
+
+
+def _pruned(
+    part: list[tuple], shares: tuple, occupied: np.ndarray, dense: np.ndarray, best: float
+) -> tuple[float, float]:
+    """What a search pruning by bounds (MaxScore) would still do for a part whose smallest
+    partial distance is ``best``: the entries per indexed row of the lists it must read, and
+    the share of the rows they name (the candidates it must score).
+
+    A cell ``c`` can add at most ``min(f p, m) / f + 2 min(p, m)`` to ``3 -`` a row's score at
+    the share ``f``, ``m`` the largest fraction any whole holds in it. The lists of the most held
+    cells are left unread as long as what they could add together leaves every row they alone
+    hold above ``best`` at every share; the rest, the essential ones, must be read."""
+    cells = np.unique(np.concatenate([c for c, _ in part]))
+    at, found = _lookup(occupied, cells)
+    cells, at = cells[found], at[found]
+    fractions = np.zeros((len(cells), len(shares)))
+    for j, (c, p) in enumerate(part):
+        where, inside = _lookup(cells, c)
+        fractions[where[inside], j] = p[inside]
+    largest = dense[:, at].max(axis=0)[:, None]
+    share = np.asarray(shares)
+    bound = np.minimum(share * fractions, largest) / share + 2 * np.minimum(fractions, largest)
+    holders = (dense[:, at] > 0).sum(axis=0)
+    order = np.argsort(-holders, kind="stable")
+    skippable = (3 - np.cumsum(bound[order], axis=0)).min(axis=1) > best
+    essential = order[int(np.argmin(skippable)) if not skippable.all() else len(order) :]
+    candidates = (dense[:, at[essential]] > 0).any(axis=1).mean()
+    return float(holders[essential].sum() / len(dense)), float(candidates)
 
 
 def _reads(part: list[tuple], held: np.ndarray, holders: np.ndarray) -> float:
@@ -157,10 +197,11 @@ def measure(name: str, data_root: Path, jobs: int) -> dict:
         wholes = [r["whole"][feature] for r in rows]
         sizes = [len(c) for c, _ in wholes]
         results[feature] = {"cells": (float(np.median(sizes)), max(sizes))}
-        ranks, reads = [], []
+        ranks, reads, pruned = [], [], []
         held, holders = np.unique(np.concatenate([c for c, _ in wholes]), return_counts=True)
+        occupied, dense = _dense(wholes)
         for kind in KINDS:
-            scores = _scores([r[kind][feature] for r in rows], wholes, shares)
+            scores = _scores([r[kind][feature] for r in rows], occupied, dense, shares)
             first = scores.argmin(axis=1)
             base = version9.setdefault(kind, scores)
             # Where version 9's partial distance ranks this feature's nearest whole: a first
@@ -169,6 +210,10 @@ def measure(name: str, data_root: Path, jobs: int) -> dict:
             if kind != "scan":  # the kinds of the issue's bars
                 ranks.append((base < at_first).sum(axis=1) + 1)
                 reads += [_reads(r[kind][feature], held, holders) / len(rows) for r in rows]
+                pruned += [
+                    _pruned(r[kind][feature], shares, occupied, dense, float(s.min()))
+                    for r, s in zip(rows, scores, strict=True)
+                ]
             expanded = whole_distances[first]
             expanded[np.arange(len(first)), first] = -1.0
             nn = evaluate_queries(scores, labels, labels).measures["NN"]
@@ -177,6 +222,7 @@ def measure(name: str, data_root: Path, jobs: int) -> dict:
         ranked = np.concatenate(ranks)
         results[feature]["rank"] = (float(np.percentile(ranked, 90)), int(ranked.max()))
         results[feature]["reads"] = float(np.median(reads))
+        results[feature]["pruned"] = tuple(np.median(pruned, axis=0))
     print(name, "done", flush=True)
     return results
 
@@ -190,8 +236,9 @@ def table(results: dict[str, dict]) -> list[str]:
         f"| feature | cells a whole (median / largest: SHREC 2007, McGill, FAUST) | its nearest "
         f"whole's rank by version 9's partial distance, cuts and holes (90th percentile / "
         f"largest) | entries an inverted-list scan reads per indexed row (median over cuts and "
-        f"holes) | {' | '.join(heads)} | SHREC 2007 mean NN |",
-        "|---|---|---|---|" + "---|" * (len(heads) + 1),
+        f"holes) | the same, pruned by bounds (MaxScore): entries per row, share of rows left "
+        f"to score (medians) | {' | '.join(heads)} | SHREC 2007 mean NN |",
+        "|---|---|---|---|---|" + "---|" * (len(heads) + 1),
     ]
     for n in first:
         counts = ", ".join("{:.0f} / {}".format(*results[c][n]["cells"]) for c in COLLECTIONS)
@@ -204,7 +251,8 @@ def table(results: dict[str, dict]) -> list[str]:
         mark = " (best)" if n == best else " (version 9)" if n == FEATURES[0][0] else ""
         reads = ", ".join(f"{results[c][n]['reads']:.0f}" for c in COLLECTIONS)
         mean = _mean_nn(first[n])
-        cells = f"{counts} | {ranks} | {reads}"
+        pruned = ", ".join("{:.0f} / {:.2f}".format(*results[c][n]["pruned"]) for c in COLLECTIONS)
+        cells = f"{counts} | {ranks} | {reads} | {pruned}"
         lines.append(f"| {n}{mark} | {cells} | {' | '.join(values)} | {mean:.3f} |")
     return lines
 

@@ -168,18 +168,19 @@ def cell_scores(
         Dimensionless, in [0, 3].
     """
     size = max(int(cells.max(initial=0)), *(int(c.max(initial=0)) for c, _ in part)) + 1
-    table = np.zeros((size, len(shares)))
+    table = np.zeros((size, len(shares)), np.float32)
     for j, (c, p) in enumerate(part):
         table[c, j] = p
-    row, slot = np.nonzero(np.asarray(table.any(axis=1))[cells] & (fractions > 0))
-    held = table[cells[row, slot]]  # (entries, shares): the part's fractions where both are
-    whole = fractions[row, slot].astype(np.float64)[:, None]
-    share = np.asarray(shares)
-    scaled = np.minimum(share * held, whole)
-    plain = np.minimum(held, whole)
-    best = np.full(len(cells), np.inf)
-    for j in range(len(shares)):
-        overlap = np.bincount(row, weights=scaled[:, j], minlength=len(cells))
-        common = np.bincount(row, weights=plain[:, j], minlength=len(cells))
-        best = np.minimum(best, 1 - overlap / share[j] + 2 - 2 * common)
-    return best
+    both = np.asarray(table.any(axis=1))[cells] & (fractions > 0)
+    counts = both.sum(axis=1)
+    held = table[cells[both]]  # (entries, shares), row by row: where the part and a whole are
+    whole = np.asarray(fractions[both], np.float32)[:, None]
+    share = np.asarray(shares, np.float32)
+    # 3 - score, summed cell by cell: min(f p, w) / f + 2 min(p, w)
+    gained = np.minimum(held * share, whole) / share + 2 * np.minimum(held, whole)
+    total = np.zeros((len(cells), len(shares)), np.float64)
+    rows = np.flatnonzero(counts)
+    if len(rows):
+        starts = np.concatenate([[0], np.cumsum(counts[rows])[:-1]])
+        total[rows] = np.add.reduceat(gained, starts, axis=0, dtype=np.float64)
+    return (3 - total).min(axis=1)

@@ -43,7 +43,7 @@ FINE_SHARES = tuple(2.0 ** (-j / 4) for j in range(13))
 # alone, the best mean NN of its three kinds of parts (docs/partial.md, "The partial distance's
 # weight").
 HISTOGRAM_WEIGHT = 1.0
-_CELL_BLOCK_ROWS = 1024  # rows of fine cells scored at a time: bounds a search's memory
+_CELL_BLOCK_ROWS = 4096  # rows of fine cells scored at a time, as a segment stores them
 
 
 @dataclass(frozen=True)
@@ -278,8 +278,9 @@ def _nearest_by_cells(
         if view.cells is None:
             raise PartialError(f"{reader.path}: a segment of this index has no fine cells")
         stored, fractions = view.cells
-        for start in range(0, stored.shape[0], _CELL_BLOCK_ROWS):
-            stop = min(start + _CELL_BLOCK_ROWS, stored.shape[0])
+        step = stored.chunks[0] if stored.chunks else _CELL_BLOCK_ROWS  # a chunk read once
+        for start in range(0, stored.shape[0], step):
+            stop = min(start + step, stored.shape[0])
             scores = cell_scores(cells, FINE_SHARES, stored[start:stop], fractions[start:stop])
             dead = view.dead[(view.dead >= start) & (view.dead < stop)] - start
             scores[dead] = np.inf
