@@ -8,7 +8,10 @@ area, which a part does not know, so the part is measured for each share ``f`` o
 diffusion times ``s * area / f`` and values divided by ``f``, as if its whole had the area
 ``area / f``. A whole's partial distance, over those shares, is the smallest sum of two terms
 (`partial_scores`): the share of the part's histograms that the whole's cannot hold (a part is
-a subset of its whole's surface), and their L1 distance.
+a subset of its whole's surface), and their L1 distance. Version 10 keeps beside each
+whole's vector its fine curvature cells (`cfsig.cells`): a part of such an index is measured at
+the 13 `FINE_SHARES` and compared by its cells instead, every row's read (docs/method.md,
+section 19).
 
 The nearest whole then stands for the part (query expansion): the others are ranked by their
 whole-shape distance to it, so a part finds the relatives of its whole as a whole would.
@@ -276,7 +279,7 @@ def _nearest_by_cells(
     best: tuple[float, int] | None = None
     for view in reader.segments:
         if view.cells is None:
-            raise PartialError(f"{reader.path}: a segment of this index has no fine cells")
+            raise PartialError(f"{reader.path}: this index keeps no fine curvature cells")
         stored, fractions = view.cells
         step = stored.chunks[0] if stored.chunks else _CELL_BLOCK_ROWS  # a chunk read once
         for start in range(0, stored.shape[0], step):
