@@ -10,7 +10,7 @@ import pytest
 from cfsig.cells import SLOTS, cell_histogram, cell_scores, packed_cells, window_cells
 from cfsig.cfhks import DESIGNS, curvature_histograms
 from cfsig.errors import IndexFileError
-from cfsig.index import Entry, IndexReader, IndexWriter, check_index
+from cfsig.index import Entry, IndexReader, IndexWriter, check_index, convert_index
 from cfsig.mesh import clean_mesh
 from cfsig.params import Params, cell_slots, signature_length
 from cfsig.parts import FINE_SHARES, measure_part
@@ -134,11 +134,14 @@ def test_an_index_keeps_the_cells_through_merges(tmp_path):
         assert len(w.segments) > 1
         with pytest.raises(ValueError, match="x/y.off: no fine cells"):
             w.add(Entry("x/y.off", "x", "/x/y.off"), random_signature(0, signature_length(V10)))
-    for compacted in (False, True):
-        if compacted:
+    for step in ("committed", "compacted", "converted"):
+        if step == "compacted":
             with IndexWriter(index, V10) as w:
                 w.compact()
                 assert len(w.segments) == 1
+        if step == "converted":
+            convert_index(index, tmp_path / "c")
+            index = tmp_path / "c"
         with IndexReader(index) as r:
             cells, fractions = r.cells()
             names = list(r.column("names"))
