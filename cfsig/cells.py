@@ -8,7 +8,7 @@ cells for k scales (33 x 9^3 = 24,057 for version 10). A whole occupies a few hu
 them, close to one per vertex of its simplified copy, so a part, a subset of its whole's
 surface, finds its own whole by them far more often than by the coarse channel (docs/partial.md,
 "Four scales jointly, on finer bins"). They are kept sparse: the cells a surface occupies and
-the share of its area in each, at most `slots` of them per row of the index.
+the share of its area in each, at most `SLOTS` of them per row of the index.
 """
 
 from __future__ import annotations
@@ -167,7 +167,7 @@ def cell_scores(
     scores : (m,) float64
         Dimensionless, in [0, 3].
     """
-    size = max(int(cells.max(initial=0)), *(int(c.max(initial=0)) for c, _ in part)) + 1
+    size = 1 + max([int(cells.max(initial=0)), *(int(c.max(initial=0)) for c, _ in part)])
     table = np.zeros((size, len(shares)), np.float32)
     for j, (c, p) in enumerate(part):
         table[c, j] = p
