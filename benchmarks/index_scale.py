@@ -135,7 +135,8 @@ def build(
     cells: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> float:
     """Write n synthetic rows of ``params`` in commits of BUILD_ROWS, with `synthetic_cells` of
-    the real ``cells`` when the parameters keep fine cells; return the seconds taken."""
+    the real ``cells`` when the parameters keep fine cells, in commits of PIECE_ROWS then (a
+    commit holds its rows in memory: 6 KB of cells a row); return the seconds taken."""
     from cfsig.signature import Signature
 
     rng = np.random.default_rng(0)
@@ -148,7 +149,10 @@ def build(
             for i, (vector, held) in enumerate(zip(rows, fine, strict=True), first):
                 sig = Signature(vector, phi, 1, 1, 1, 0.0, (), "clean", 0.0, "", held)
                 writer.add(entry(i), sig)
-            if writer.pending >= BUILD_ROWS or first + PIECE_ROWS >= n:
+            if (
+                writer.pending >= (BUILD_ROWS if cells is None else PIECE_ROWS)
+                or first + PIECE_ROWS >= n
+            ):
                 writer.commit()
     seconds = time.perf_counter() - start
     os.sync()  # so that writing back the build does not slow the fsyncs of the commits timed
