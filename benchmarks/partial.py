@@ -3,6 +3,8 @@
     python benchmarks/partial.py --data-root /work/data --doc docs/partial.md
     python benchmarks/partial.py --scale 1000000 --real INDEX --dir DIR   # one query's time
 
+(``--scale`` builds synthetic rows of the version of INDEX, an index of SHREC 2007: 9 or 10.)
+
 For every mesh of each collection (``--data-root``, where ``../shared/data/unpack`` puts them)
 the script makes two parts, seeded by the mesh's position so that every run makes the same:
 
@@ -21,7 +23,10 @@ Each part is a query against the collection's whole shapes, the part's own whole
 relevant the wholes of its class (`cfsig.measures.evaluate_queries`), ranked three ways: as a
 whole shape (its default ``cfhks`` signature, what ``cfsig query`` does), by the partial distance of
 the curvature channel alone (`cfsig.parts.partial_distances`), and as ``cfsig query --partial``
-ranks (`cfsig.parts.expanded_distances`); and by the partial distance for each weight of
+ranks (`cfsig.parts.expanded_distances`); the last two also on an index of version 10, the
+part measured at 13 shares and ranked by its fine curvature cells (`cfsig.parts.measure_part`,
+the wholes' cells from their version 10 signatures, whose vectors are the default's); and by
+the partial distance for each weight of
 `WEIGHTS`, which is how its weight was chosen (on SHREC 2007). It also lists SHREC 2007's
 genus outliers, the meshes whose Euler characteristic is not their class's most common one,
 with their first tier (FT) against the other queries of their classes, for every ``cfhks``
