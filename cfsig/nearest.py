@@ -181,7 +181,7 @@ def _scan(
                 best.merge(first + q0, view.start + block.start, dist, live)
 
     width = max((dataset.shape[1] for dataset, _ in sources.values()), default=1)
-    _parallel(blocks, work, (block_rows, width))
+    parallel(blocks, work, (block_rows, width))
 
 
 def _source(view: SegmentView, columns: slice | None) -> tuple[h5py.Dataset, slice | None]:
@@ -251,7 +251,7 @@ class _Pruned:
                 bounds[:, at] = out
 
         width = max(v.sketch.rows.shape[1] for v in self.views if v.sketch)
-        _parallel(blocks, work, (block_rows, width))
+        parallel(blocks, work, (block_rows, width))
         return bounds
 
     def _first(self, j: int, query: np.ndarray, bounds: np.ndarray) -> np.float32:
@@ -302,7 +302,7 @@ class _Pruned:
             if len(local):
                 self._exact(j, query, start + local, buffer, lock)
 
-        _parallel(tasks, work, (block_rows, self.width))
+        parallel(tasks, work, (block_rows, self.width))
 
     def _exact(
         self,
@@ -406,14 +406,22 @@ class _Best:
 Task = TypeVar("Task")
 
 
-def _parallel(
+def parallel(
     tasks: list[Task],
     work: Callable[[Task, np.ndarray, threading.Lock], None],
     buffer_shape: tuple[int, int],
 ) -> None:
     """Run ``work(task, buffer, lock)`` on every task, one thread per core, each with a buffer.
 
-    The lock is shared: ``work`` holds it while it changes shared state.
+    Parameters
+    ----------
+    tasks : list
+        The tasks, taken in order by whichever thread is free.
+    work : callable
+        ``work(task, buffer, lock)``: the buffer is its thread's own, reused from task to task;
+        the lock is shared, and ``work`` holds it while it changes shared state.
+    buffer_shape : (int, int)
+        Shape of each thread's float32 buffer.
     """
     if not tasks:
         return

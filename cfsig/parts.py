@@ -21,6 +21,7 @@ Only ``cfhks`` version 3 and later store the curvature channel (docs/method.md).
 from __future__ import annotations
 
 import os
+import threading
 from dataclasses import dataclass
 from functools import partial
 
@@ -31,9 +32,9 @@ from .cfhks import DESIGNS, Design, curvature_histograms, weigh_curvature
 from .conformal import Operators, operators
 from .curvature import smoothed_curvature
 from .errors import MeshError, PartialError, SolverError
-from .index import IndexReader
+from .index import IndexReader, SegmentView
 from .mesh import Mesh, read_mesh
-from .nearest import Hit, l1_distances, nearest
+from .nearest import Hit, l1_distances, nearest, parallel
 from .params import Params, curvature_slice
 from .simplify import simplified_mesh
 
@@ -46,7 +47,8 @@ FINE_SHARES = tuple(2.0 ** (-j / 4) for j in range(13))
 # alone, the best mean NN of its three kinds of parts (docs/partial.md, "The partial distance's
 # weight").
 HISTOGRAM_WEIGHT = 1.0
-_CELL_BLOCK_ROWS = 4096  # rows of fine cells scored at a time, as a segment stores them
+_CELL_BLOCK_ROWS = 4096  # rows of fine cells read at a time, as a segment stores them
+_SCORE_ROWS = 512  # rows of fine cells scored at a time: bounds a search's memory
 
 
 @dataclass(frozen=True)
@@ -275,24 +277,40 @@ def _nearest_by_cells(
     reader: IndexReader, cells: tuple[tuple[np.ndarray, np.ndarray], ...]
 ) -> tuple[int, float] | None:
     """The row of the smallest partial distance by fine cells, and that distance; the first
-    such row on ties; None for an empty index. Reads every live row's cells, block by block."""
-    best: tuple[float, int] | None = None
+    such row on ties; None for an empty index. Reads every live row's cells, chunk by chunk,
+    one thread per core."""
+    blocks = []
     for view in reader.segments:
         if view.cells is None:
             raise PartialError(f"{reader.path}: this index keeps no fine curvature cells")
-        stored, fractions = view.cells
-        step = stored.chunks[0] if stored.chunks else _CELL_BLOCK_ROWS  # a chunk read once
-        for start in range(0, stored.shape[0], step):
-            stop = min(start + step, stored.shape[0])
-            scores = cell_scores(cells, FINE_SHARES, stored[start:stop], fractions[start:stop])
-            dead = view.dead[(view.dead >= start) & (view.dead < stop)] - start
-            scores[dead] = np.inf
-            at = int(np.argmin(scores))
-            if np.isfinite(scores[at]) and (best is None or scores[at] < best[0]):
-                best = float(scores[at]), view.start + start + at
-    if best is None:
+        rows = view.cells[0].shape[0]
+        step = view.cells[0].chunks[0] if view.cells[0].chunks else _CELL_BLOCK_ROWS
+        blocks += [(view, start, min(start + step, rows)) for start in range(0, rows, step)]
+    found: list[tuple[float, int]] = []
+
+    def work(task: tuple[SegmentView, int, int], _: np.ndarray, lock: threading.Lock) -> None:
+        view, start, stop = task
+        assert view.cells is not None  # checked above
+        stored, fractions = (data[start:stop] for data in view.cells)
+        scores = np.concatenate(  # a chunk read at once, scored a slice at a time for memory
+            [
+                cell_scores(
+                    cells, FINE_SHARES, stored[i : i + _SCORE_ROWS], fractions[i : i + _SCORE_ROWS]
+                )
+                for i in range(0, len(stored), _SCORE_ROWS)
+            ]
+        )
+        scores[view.dead[(view.dead >= start) & (view.dead < stop)] - start] = np.inf
+        at = int(np.argmin(scores))
+        if np.isfinite(scores[at]):
+            with lock:
+                found.append((float(scores[at]), view.start + start + at))
+
+    parallel(blocks, work, (1, 1))
+    if not found:
         return None
-    return int(reader.logical_rows(np.array([best[1]]))[0]), best[0]
+    score, physical = min(found)
+    return int(reader.logical_rows(np.array([physical]))[0]), score
 
 
 def partial_file(path: str | os.PathLike, params: Params) -> Part:
