@@ -16,7 +16,7 @@ import click
 
 from .errors import CfsigError
 from .isolate import Limits
-from .params import DESCRIPTORS, REPAIR_MODES, SOLVERS, Params
+from .params import DEFAULT_VERSIONS, DESCRIPTORS, REPAIR_MODES, SOLVERS, Params
 
 if TYPE_CHECKING:  # each command imports what it uses, so that `cfsig --help` starts fast
     from .evaluate import Collection, Evaluation
@@ -57,6 +57,14 @@ _descriptor_option = click.option(
     "signatures (cfhks, its default version) [compute: cf; index: cfhks, or an existing "
     "index's own descriptor and version].",
 )
+_version_option = click.option(
+    "--descriptor-version", "version", type=int, default=None,
+    help="The descriptor's version [its default: "
+    + ", ".join(f"{name} {v}" for name, v in DEFAULT_VERSIONS.items())
+    + "; index: an existing index's own]: e.g. cfhks 10, which keeps fine curvature cells "
+    "for partial queries, or cfhks 6, whose finer curvature matches exact cuts best but not "
+    "noisy scans (docs/descriptors.md).",
+)  # fmt: skip
 _solver_option = click.option(
     "--solver",
     type=click.Choice(SOLVERS),
@@ -146,13 +154,15 @@ def main() -> None:
 @click.argument("meshes", nargs=-1, required=True, type=_PATH)
 @_with(_params_options)
 @_descriptor_option
+@_version_option
 @_solver_option
 @_stage_timeout_option
 @_json_option
 @click.option(
     "--save",
     type=_FOLDER,
-    help="Write DIR/<name>.npz with the signature and per-vertex phi.",
+    help="Write DIR/<name>.npz with the signature and per-vertex phi (and the fine curvature "
+    "cells of a version that keeps them, cfhks 10).",
 )
 @click.option(
     "--png",
@@ -176,6 +186,7 @@ def compute(
     bins,
     repair,
     descriptor,
+    version,
     solver,
     stage_timeout,
     as_json,
@@ -195,8 +206,9 @@ def compute(
     if ply and len(meshes) > 1:
         raise click.UsageError("--ply writes one mesh: give a single MESH")
     params = _params(
-        normalize=normalize, seed=seed, bins=bins, repair=repair, descriptor=descriptor
-    )
+        normalize=normalize, seed=seed, bins=bins, repair=repair, descriptor=descriptor,
+        version=version,
+    )  # fmt: skip
     if hist and params.descriptor != "cf":
         raise click.UsageError("--hist plots the histograms of the cf descriptor")
     import numpy as np
@@ -229,6 +241,11 @@ def compute(
                 signature=sig.vector,
                 phi=sig.phi,
                 params=params.to_json(),
+                **(
+                    {}
+                    if sig.cells is None
+                    else {"cells": sig.cells[0], "cell_fractions": sig.cells[1]}
+                ),
             )
         if not as_json:
             click.echo(
@@ -280,12 +297,7 @@ def _report_errors(errors: list[str]) -> None:
 )
 @_with(_params_options)
 @_descriptor_option
-@click.option(
-    "--descriptor-version", "version", type=int, default=None,
-    help="The descriptor's version, for a new index [the latest; an existing index's own]: "
-    "e.g. cfhks 6, whose finer curvature matches exact cuts of indexed meshes best but not "
-    "noisy scans (docs/descriptors.md).",
-)  # fmt: skip
+@_version_option
 @_solver_option
 @_stage_timeout_option
 @_jobs_option

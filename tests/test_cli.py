@@ -53,6 +53,20 @@ def test_compute_text_json_and_save(collection, tmp_path):
     assert row["phi_min"] < 0 < row["phi_max"] and row["curvature_error"] >= 0
 
 
+def test_compute_a_version_by_name_saves_its_cells(collection, tmp_path):
+    mesh = collection / "limbs2" / "limbs2-0.off"
+    args = ("compute", "--json", "--save", tmp_path, "--descriptor", "cfhks")
+    assert _run(*args, mesh).exit_code == 0
+    assert "cells" not in np.load(tmp_path / "limbs2-0.npz")  # the default, version 9
+    assert _run(*args, "--descriptor-version", "10", mesh).exit_code == 0
+    saved = np.load(tmp_path / "limbs2-0.npz")
+    assert json.loads(str(saved["params"]))["version"] == 10
+    cells, fractions = saved["cells"], saved["cell_fractions"]
+    assert cells.shape == fractions.shape and abs(fractions.sum() - 1) < 1e-3
+    result = _run("compute", "--descriptor-version", "10", mesh)  # cf has one version
+    assert result.exit_code != 0 and "cf has no version 10" in result.output
+
+
 def test_compute_bad_file_one_line_error(tmp_path):
     bad = tmp_path / "bad.off"
     bad.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n")
