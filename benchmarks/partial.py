@@ -310,33 +310,6 @@ def _own_whole_table(results: dict[str, dict]) -> list[str]:
     return lines
 
 
-def _two_stage_table(results: dict[str, dict]) -> list[str]:
-    """Where version 10's nearest whole ranks by version 9's partial distance: how many of
-    version 9's first candidates a second stage scoring only those by fine cells would need to
-    answer every query as version 10's full scan does."""
-    fractions = (0.01, 0.05, 0.10, 0.20)
-    lines = [
-        "| collection | parts | "
-        + " | ".join(f"kept in version 9's first {f:.0%}" for f in fractions)
-        + " | its rank, median (largest), of N |",
-        "|---|---|" + "---|" * len(fractions) + "---|",
-    ]
-    for name, data in results.items():
-        for kind in KINDS:
-            coarse = data[f"{kind} partial distances"]
-            best = data[f"{kind} fine distances"].argmin(axis=1)
-            bar = coarse[np.arange(len(best)), best][:, None]
-            rank = (coarse < bar).sum(axis=1) + 1
-            n = coarse.shape[1]
-            kept = [np.mean(rank <= max(1, int(np.ceil(f * n)))) for f in fractions]
-            lines.append(
-                f"| {name} | {kind} | "
-                + " | ".join(f"{k:.3f}" for k in kept)
-                + f" | {np.median(rank):.0f} ({rank.max()}) of {n} |"
-            )
-    return lines
-
-
 def _genus_table(data: dict) -> list[str]:
     """SHREC 2007's genus outliers and their FT against their classes' other queries."""
     labels = np.array(data["labels"])
@@ -487,10 +460,6 @@ def main() -> None:
             "### Where each part's own whole ranks by the partial distance",
             "",
             *_own_whole_table(results),
-            "",
-            "### Version 10's nearest whole by version 9's partial distance",
-            "",
-            *_two_stage_table(results),
             "",
             "### Genus outliers of SHREC 2007",
             "",
