@@ -262,11 +262,11 @@ def _mean_nn(kinds: dict) -> float:
     return float(np.mean([kinds[k][0] for k in KINDS]))
 
 
-def write_doc(doc: Path, lines: list[str]) -> None:
-    """Replace the study's table in ``doc`` (after its title, before the next heading)."""
+def write_doc(doc: Path, lines: list[str], title: str = TITLE) -> None:
+    """Replace the first table after the section ``title`` in ``doc``."""
     text = doc.read_text()
-    start = text.index(TITLE)
-    head, _, rest = text[start:].partition("\n| feature |")
+    start = text.index(title)
+    head, _, rest = text[start:].partition("\n|")
     end = rest.find("\n\n")
     body = "\n".join(lines)
     doc.write_text(text[:start] + head + "\n" + body + rest[end:])
