@@ -236,17 +236,10 @@ def compute(
         if save:
             assert sig.phi is not None  # solved for compute (phi=True)
             save.mkdir(parents=True, exist_ok=True)
-            np.savez(
-                save / f"{path.stem}.npz",
-                signature=sig.vector,
-                phi=sig.phi,
-                params=params.to_json(),
-                **(
-                    {}
-                    if sig.cells is None
-                    else {"cells": sig.cells[0], "cell_fractions": sig.cells[1]}
-                ),
-            )
+            arrays: dict[str, Any] = {"signature": sig.vector, "phi": sig.phi}
+            if sig.cells is not None:
+                arrays["cells"], arrays["cell_fractions"] = sig.cells
+            np.savez(save / f"{path.stem}.npz", params=params.to_json(), **arrays)
         if not as_json:
             click.echo(
                 f"{path}: {row['vertices']} vertices, {row['faces']} faces, "
