@@ -47,6 +47,7 @@ os.environ.update(
 )
 
 import argparse
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -272,9 +273,15 @@ def write_doc(doc: Path, lines: list[str], title: str = TITLE) -> None:
     doc.write_text(text[:start] + head + "\n" + body + rest[end:])
 
 
-def main() -> None:
-    """Measure, print the table, and write it into ``--doc``."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def run_study(
+    description: str,
+    measure: Callable[[str, Path, int], dict],
+    table: Callable[[dict], list[str]],
+    title: str = TITLE,
+) -> None:
+    """A study's command line: measure every collection, print the table, and write it into
+    ``--doc`` after the section ``title``."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--data-root", type=Path, default=ROOT.parent / "shared" / "data")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--doc", type=Path, help="a page holding the study's section")
@@ -283,8 +290,8 @@ def main() -> None:
     lines = table(results)
     print("\n".join(lines))
     if args.doc:
-        write_doc(args.doc, lines)
+        write_doc(args.doc, lines, title)
 
 
 if __name__ == "__main__":
-    main()
+    run_study(__doc__.splitlines()[0], measure, table)

@@ -35,7 +35,6 @@ os.environ.update(
     dict.fromkeys(["OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"], "1")
 )
 
-import argparse
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -43,15 +42,14 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 from descriptors import collection_paths
-from partial import COLLECTIONS, FINE, cut, holes
-from partial_fine import write_doc
+from partial import FINE, cut, holes
+from partial_fine import run_study
 
 from cfsig.cells import cell_scores
 from cfsig.mesh import read_mesh
 from cfsig.parts import FINE_SHARES, measure_part
 from cfsig.signature import compute_signature
 
-ROOT = Path(__file__).resolve().parents[1]
 TITLE = "## A first stage for version 10: a study"
 KINDS = ("cut", "holes")
 BINS, WIDTH = 33, 9  # version 10's cells: 33 first bins, steps within 4 (cfsig.cells)
@@ -176,19 +174,5 @@ def table(results: dict[str, dict[str, dict[str, tuple]]]) -> list[str]:
     return lines
 
 
-def main() -> None:
-    """Measure, print the table, and write it into ``--doc``."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data-root", type=Path, default=ROOT.parent / "shared" / "data")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
-    parser.add_argument("--doc", type=Path, help="a page holding the study's section")
-    args = parser.parse_args()
-    results = {name: measure(name, args.data_root, args.jobs) for name in COLLECTIONS}
-    lines = table(results)
-    print("\n".join(lines))
-    if args.doc:
-        write_doc(args.doc, lines, TITLE)
-
-
 if __name__ == "__main__":
-    main()
+    run_study(__doc__.splitlines()[0], measure, table, TITLE)
