@@ -46,14 +46,16 @@ from partial import FINE, cut, holes
 from partial_fine import run_study
 
 from cfsig.cells import cell_scores
+from cfsig.cfhks import DESIGNS
 from cfsig.mesh import read_mesh
 from cfsig.parts import FINE_SHARES, measure_part
 from cfsig.signature import compute_signature
 
 TITLE = "## A first stage for version 10: a study"
 KINDS = ("cut", "holes")
-BINS, WIDTH = 33, 9  # version 10's cells: 33 first bins, steps within 4 (cfsig.cells)
-CELLS = BINS * WIDTH**3
+BINS, BAND = DESIGNS[FINE.version or 0].fine or (0, 0)  # version 10's: 33 bins, steps within 4
+WIDTH = 2 * BAND + 1
+CELLS = BINS * WIDTH**3  # its four scales: the first's bin and three steps (cfsig.cells)
 KEPT = (0.05, 0.10, 0.20)
 
 
