@@ -1,4 +1,4 @@
-"""The descriptors on SHREC 2007, McGill and FAUST in one run: cf, cfhks 1 to 8, ShapeDNA.
+"""The descriptors on SHREC 2007, McGill and FAUST in one run: cf, cfhks 1 to 9, ShapeDNA.
 
 Stages (each prints Markdown for docs/descriptors.md; run from the repository root):
 
@@ -9,7 +9,7 @@ Stages (each prints Markdown for docs/descriptors.md; run from the repository ro
     python benchmarks/descriptors.py study8     # how version 8 was chosen: version 7 for less
     python benchmarks/descriptors.py divisor    # a version's curvature divisor (version 3's rule)
     python benchmarks/descriptors.py tolerance  # version 6's conjugate gradients' tolerance
-    python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all nine
+    python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all eleven
     python benchmarks/descriptors.py cost       # whole `cfsig index` runs: default, cf, ShapeDNA
     python benchmarks/descriptors.py noise      # which curvature scales survive vertex noise
     python benchmarks/descriptors.py coarse     # version 4: the spectrum of a simplified copy
@@ -17,9 +17,9 @@ Stages (each prints Markdown for docs/descriptors.md; run from the repository ro
     python benchmarks/descriptors.py lanczos    # the Lanczos iteration's steps against its cap
 
 ``measure`` computes, for every mesh of the three collections (``--data-root``, where
-``../shared/data/unpack`` puts them), nine descriptors from the file, each timed in CPU seconds
+``../shared/data/unpack`` puts them), eleven descriptors from the file, each timed in CPU seconds
 of its worker process with one BLAS thread, reading included: ``cf`` (the paper's), ``cfhks``
-versions 1 to 7 (`cfsig.cfhks.DESIGNS`) and ShapeDNA (lapy, the 50 smallest nonzero
+versions 1 to 9 (`cfsig.cfhks.DESIGNS`) and ShapeDNA (lapy, the 50 smallest nonzero
 eigenvalues times the area divided by their index, compared by L2, as in the issue's table). It
 also keeps the unweighted channels of version 2 (phi, the spectrum, heat at eight times), from
 which ``study`` builds every candidate weighting. Caches go under ``--cache`` (never commit).
@@ -105,7 +105,7 @@ from cfsig.curvature import smoothed_curvature
 from cfsig.errors import MeshError
 from cfsig.measures import RetrievalReport, evaluate_distances
 from cfsig.mesh import clean_mesh, read_mesh
-from cfsig.params import VERSIONS, Params
+from cfsig.params import DEFAULT_VERSIONS, Params
 from cfsig.repair import repair_mesh
 from cfsig.signature import signature_file
 from cfsig.simplify import simplified_mesh
@@ -898,7 +898,7 @@ def compare(args: argparse.Namespace) -> None:
                 + " | ".join(cells)
                 + f" | {np.median(data[c][name + ' s']):.3f} |"
             )
-    default = f"cfhks {VERSIONS['cfhks'][-1]}"
+    default = f"cfhks {DEFAULT_VERSIONS['cfhks']}"
     shrec = _report(_distances(default, data["shrec07"][default]), data["shrec07"]["labels"])
     checks = {
         f"{c}: FT >= ShapeDNA's + 0.02": ft[c, default] >= ft[c, "ShapeDNA"] + 0.02
