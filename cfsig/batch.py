@@ -99,7 +99,8 @@ def compute_many(
     Yields
     ------
     outcome : Outcome
-        One per path, in completion order.
+        One per path, in completion order; those that complete together, in the order of
+        ``paths``.
 
     Raises
     ------
@@ -123,7 +124,8 @@ def compute_many(
             if not running:
                 break
             done, _ = wait(running, return_when=FIRST_COMPLETED)
-            for future in done:
+            # Those done together in the order they were sent: with one job, the order of the files.
+            for future in [f for f in running if f in done]:
                 path = running.pop(future)
                 try:
                     yield future.result()
