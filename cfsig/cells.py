@@ -13,15 +13,22 @@ the share of its area in each, at most `SLOTS` of them per row of the index.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import functools
+import importlib
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 CURVATURE_RANGE = 6.0  # bins span asinh(value / CURVATURE_UNIT) in [-6, 6]: +-2000 in value
 CURVATURE_UNIT = 10.0  # about the sphere's 4 pi: the histogram is linear below, logarithmic above
 SLOTS = 1024  # cells kept per whole: 709 a whole is the median on SHREC 2007, 1,070 the most
+# Rows from which numba's kernel repays its import and loading its compiled code (about 0.3 s),
+# numpy's taking about 35 µs a row: docs/partial.md, "Scale".
+FAST_MIN_ROWS = 20_000
 # A whole's `packed_cells`: (SLOTS,) uint16 cells and (SLOTS,) float32 fractions.
 Cells = tuple[np.ndarray, np.ndarray]
+# A part's scores of blocks of wholes: ``scorer(cells, fractions)`` as `cell_scores`.
+Scorer = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 def curvature_bins(values: np.ndarray, bins: int) -> np.ndarray:
@@ -184,3 +191,35 @@ def cell_scores(
         starts = np.concatenate([[0], np.cumsum(counts[rows])[:-1]])
         total[rows] = np.add.reduceat(gained, starts, axis=0, dtype=np.float64)
     return (3 - total).min(axis=1)
+
+
+def part_scorer(
+    part: Sequence[tuple[np.ndarray, np.ndarray]], shares: tuple[float, ...], rows: int
+) -> Scorer:
+    """`cell_scores` of one part, by numba's kernel (extra ``cfsig[fast]``) where it pays.
+
+    Parameters
+    ----------
+    part : sequence of (cells, fractions)
+        The part's `cell_histogram` at each share.
+    shares : tuple of float
+        The shares, one per histogram of ``part``.
+    rows : int
+        Rows the search will score: from `FAST_MIN_ROWS`, numba's kernel if installed
+        (`cfsig.cells_numba.part_scorer`, about ten times as fast), else `cell_scores`.
+
+    Returns
+    -------
+    scorer : callable
+        ``scorer(cells, fractions)``: the wholes' (m, slots) `packed_cells` and fractions to
+        their (m,) float64 scores, as `cell_scores`.
+    """
+    if rows >= FAST_MIN_ROWS:
+        try:
+            fast = importlib.import_module("cfsig.cells_numba")
+        except ImportError:
+            pass
+        else:
+            scorer: Scorer = fast.part_scorer(part, shares)
+            return scorer
+    return functools.partial(cell_scores, part, shares)

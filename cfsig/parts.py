@@ -27,7 +27,7 @@ from functools import partial
 
 import numpy as np
 
-from .cells import cell_histogram, cell_scores
+from .cells import cell_histogram, cell_scores, part_scorer
 from .cfhks import DESIGNS, Design, curvature_histograms, weigh_curvature
 from .conformal import Operators, operators
 from .curvature import smoothed_curvature
@@ -280,12 +280,15 @@ def _nearest_by_cells(
     such row on ties; None for an empty index. Reads every live row's cells, chunk by chunk,
     one thread per core."""
     blocks = []
+    rows = 0
     for view in reader.segments:
         if view.cells is None:
             raise PartialError(f"{reader.path}: this index keeps no fine curvature cells")
-        rows = view.cells[0].shape[0]
+        size = view.cells[0].shape[0]
         step = view.cells[0].chunks[0] if view.cells[0].chunks else _CELL_BLOCK_ROWS
-        blocks += [(view, start, min(start + step, rows)) for start in range(0, rows, step)]
+        blocks += [(view, start, min(start + step, size)) for start in range(0, size, step)]
+        rows += size
+    score = part_scorer(cells, FINE_SHARES, rows)
     found: list[tuple[float, int]] = []
 
     def work(task: tuple[SegmentView, int, int], _: np.ndarray, lock: threading.Lock) -> None:
@@ -294,9 +297,7 @@ def _nearest_by_cells(
         stored, fractions = (data[start:stop] for data in view.cells)
         scores = np.concatenate(  # a chunk read at once, scored a slice at a time for memory
             [
-                cell_scores(
-                    cells, FINE_SHARES, stored[i : i + _SCORE_ROWS], fractions[i : i + _SCORE_ROWS]
-                )
+                score(stored[i : i + _SCORE_ROWS], fractions[i : i + _SCORE_ROWS])
                 for i in range(0, len(stored), _SCORE_ROWS)
             ]
         )
@@ -309,8 +310,8 @@ def _nearest_by_cells(
     parallel(blocks, work, (1, 1))
     if not found:
         return None
-    score, physical = min(found)
-    return int(reader.logical_rows(np.array([physical]))[0]), score
+    best, physical = min(found)
+    return int(reader.logical_rows(np.array([physical]))[0]), best
 
 
 def partial_file(path: str | os.PathLike, params: Params) -> Part:

@@ -1,13 +1,22 @@
 """Fine curvature cells (cfsig.cells): the histograms, their scores, version 10's signatures and
 their storage in an index."""
 
+import functools
 from dataclasses import replace
 
 import h5py
 import numpy as np
 import pytest
 
-from cfsig.cells import SLOTS, cell_histogram, cell_scores, packed_cells, window_cells
+from cfsig.cells import (
+    FAST_MIN_ROWS,
+    SLOTS,
+    cell_histogram,
+    cell_scores,
+    packed_cells,
+    part_scorer,
+    window_cells,
+)
 from cfsig.cfhks import DESIGNS, curvature_histograms
 from cfsig.errors import IndexFileError
 from cfsig.index import Entry, IndexReader, IndexWriter, check_index, convert_index
@@ -90,6 +99,44 @@ def test_cell_scores_are_the_partial_distance():
     assert np.allclose(got, _dense_scores(part, shares, cells, fractions, size), atol=1e-6)
     same = cell_scores([(c, w) for c, w in [wholes[2]]], (1.0,), cells[2:3], fractions[2:3])
     assert same[0] == pytest.approx(0.0, abs=1e-6)  # a whole is its own part at share 1
+
+
+def test_compiled_scores_are_numpys():
+    pytest.importorskip("numba", reason="numba's kernel is the extra cfsig[fast]")
+    rng = np.random.default_rng(5)
+    size, shares = 3000, FINE_SHARES
+
+    def histogram(count):
+        c = np.sort(rng.choice(size, count, replace=False))
+        w = rng.random(count)
+        return c, w / w.sum()
+
+    part = [histogram(200) for _ in shares]
+    cells = np.zeros((300, 400), np.uint16)
+    fractions = np.zeros((300, 400), np.float32)
+    for row in range(len(cells)):
+        c, w = histogram(int(rng.integers(1, 400)))
+        if row % 3 == 0:  # some of them the part's own cells, so that the scores spread
+            c, w = part[row % len(shares)]
+        w = w.copy()
+        w[rng.random(len(w)) < 0.05] = 0  # occupied slots of no area, among the others
+        cells[row, : len(c)], fractions[row, : len(c)] = c, w
+    fast = part_scorer(part, shares, FAST_MIN_ROWS)
+    assert not isinstance(fast, functools.partial)  # numba's, not cell_scores
+    expected = cell_scores(part, shares, cells, fractions)
+    got = fast(cells, fractions)
+    assert got.dtype == np.float64 and got.shape == (300,)
+    assert np.allclose(got, expected, atol=1e-5)
+    assert np.argmin(got) == np.argmin(expected)
+    assert np.array_equal(fast(cells[:0], fractions[:0]), np.zeros(0))
+
+
+def test_small_searches_score_with_numpy():
+    part = [(np.array([1, 2]), np.array([0.5, 0.5]))]
+    scorer = part_scorer(part, (1.0,), FAST_MIN_ROWS - 1)
+    cells, fractions = np.array([[1, 2]], np.uint16), np.array([[0.5, 0.5]], np.float32)
+    assert isinstance(scorer, functools.partial) and scorer.func is cell_scores
+    assert scorer(cells, fractions)[0] == pytest.approx(0.0, abs=1e-6)
 
 
 def test_version_10_is_version_9s_vector_with_cells():
