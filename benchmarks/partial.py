@@ -375,11 +375,13 @@ def scale(rows: int, real: str, folder: Path) -> str:
     version 9 the query's vectors for the seven shares are the curvature columns of seven more
     such rows; for version 10, whose rows also get fine cells mixed from two real rows'
     (`index_scale.synthetic_cells`), the query's cells at the 13 shares are 13 more such rows'.
-    Open, `cfsig.parts.partial_search` for 20 results and their names, once untimed, then three
-    times.
+    Open, `cfsig.parts.partial_search` for 20 results and their names: the first query of the
+    process (imports and compiled code loaded), then three more. For version 10 twice, in two
+    processes, whatever `cfsig.cells.part_scorer` would choose for so many rows: with numba's
+    kernel, and with NumPy's; and a third time scoring nothing, what reading the cells costs.
     """
     sys.path.insert(0, str(ROOT))
-    from benchmarks.index_scale import K, build, in_child, real_rows
+    from benchmarks.index_scale import build, real_rows
     from cfsig.index import IndexReader
 
     with IndexReader(real) as reader:
@@ -389,11 +391,37 @@ def scale(rows: int, real: str, folder: Path) -> str:
     built = None
     if not (path / "manifest.h5").exists():
         built = build(path, rows, real_rows(real, params), params, cells)
+    how = "reused" if built is None else f"built in {built:.0f} s"
+    lines = [f"One partial query over {rows:,} rows of version {params.version} ({how}):"]
+    for kernel in ("numba", "NumPy", "reading alone") if cells is not None else ("",):
+        out = _time_partial(real, path, kernel)
+        lines.append(
+            f"- {kernel or 'query'}: **{statistics.median(out['times']):.3f} s** (median of 3; "
+            + ", ".join(f"{t:.3f}" for t in out["times"])
+            + f"); first of the process {out['first']:.3f} s; peak {out['peak_mb']:.0f} MB; "
+            f"load average {os.getloadavg()[0]:.1f}."
+        )
+    return "\n".join(lines)
+
+
+def _time_partial(real: str, path: Path, kernel: str) -> dict:
+    """`scale`'s query in a fresh process: the first, then three more; with ``kernel`` for the
+    fine cells ("numba" or "NumPy"; "reading alone" scores every row 0), else as cfsig
+    chooses."""
+    from benchmarks.index_scale import K, in_child
+
+    force = {
+        "numba": "cfsig.cells.FAST_MIN_ROWS = 0",
+        "NumPy": "cfsig.cells.FAST_MIN_ROWS = 1 << 62",
+        "reading alone": "cfsig.parts.part_scorer = lambda *_: lambda c, f: np.zeros(len(c))",
+    }.get(kernel, "")
     code = f"""
 import numpy as np
+import cfsig.cells, cfsig.parts
 from cfsig.index import IndexReader
 from cfsig.parts import FINE_SHARES, SHARES, Part, curvature_columns, partial_search
 from benchmarks.index_scale import real_rows, synthetic_cells, synthetic_rows
+{force}
 with IndexReader({real!r}) as reader:
     params, cells = reader.params, reader.cells()
 rng = np.random.default_rng(6)
@@ -408,17 +436,9 @@ def once():
     with IndexReader({str(path)!r}) as r:
         hits, _ = partial_search(r, part, {K})
     return time.perf_counter() - t
-once()
-out = {{'times': [once() for _ in range(3)]}}
+out = {{'first': once(), 'times': [once() for _ in range(3)]}}
 """
-    out = in_child(code)
-    how = "reused" if built is None else f"built in {built:.0f} s"
-    return (
-        f"One partial query over {rows:,} rows of version {params.version} ({how}"
-        f"): {statistics.median(out['times']):.3f} s (median of 3; "
-        + ", ".join(f"{t:.3f}" for t in out["times"])
-        + f"), peak {out['peak_mb']:.0f} MB; load average {os.getloadavg()[0]:.1f}."
-    )
+    return in_child(code)
 
 
 def main() -> None:

@@ -22,9 +22,9 @@ import numpy as np
 CURVATURE_RANGE = 6.0  # bins span asinh(value / CURVATURE_UNIT) in [-6, 6]: +-2000 in value
 CURVATURE_UNIT = 10.0  # about the sphere's 4 pi: the histogram is linear below, logarithmic above
 SLOTS = 1024  # cells kept per whole: 709 a whole is the median on SHREC 2007, 1,070 the most
-# Rows from which numba's kernel repays its import and loading its compiled code (about 0.3 s),
-# numpy's taking about 35 µs a row: docs/partial.md, "Scale".
-FAST_MIN_ROWS = 20_000
+# Rows from which numba's kernel repays its import and loading its compiled code (about 0.25 s)
+# even in a process's first query: docs/partial.md, "Scale", "Version 10: numba's kernel".
+FAST_MIN_ROWS = 1_000
 # A whole's `packed_cells`: (SLOTS,) uint16 cells and (SLOTS,) float32 fractions.
 Cells = tuple[np.ndarray, np.ndarray]
 # A part's scores of blocks of wholes: ``scorer(cells, fractions)`` as `cell_scores`.
