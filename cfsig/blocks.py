@@ -1,4 +1,4 @@
-"""Blocks: stream the rows of a 2-D float32 HDF5 dataset without holding it in memory.
+"""Blocks: stream the rows of a 2-D float32 or uint16 HDF5 dataset without holding it in memory.
 
 Where HDF5 stores rows as plain bytes (contiguous, or chunked by whole rows with no filter, in a
 file without a user block, read by the default driver), a block is read from the file with one
@@ -24,7 +24,7 @@ import numpy as np
 
 from .errors import IndexFileError
 
-_FLOAT32 = np.dtype(np.float32)
+_PLAIN_TYPES = (np.dtype(np.float32), np.dtype(np.uint16))  # native: the bytes are the values
 _DENSE = 4  # `read_rows` reads a whole block when it wants a quarter of its rows or more
 
 
@@ -68,7 +68,7 @@ def plan_blocks(dataset: h5py.Dataset, rows_per_block: int) -> list[Block]:
     base = dataset.id.get_offset() if plain else None
     if dataset.chunks is not None:
         rows_per_block = -(-rows_per_block // dataset.chunks[0]) * dataset.chunks[0]
-    row_bytes = dataset.shape[1] * _FLOAT32.itemsize
+    row_bytes = dataset.shape[1] * dataset.dtype.itemsize
     return [
         Block(s, min(s + rows_per_block, n), None if base is None else base + s * row_bytes)
         for s in range(0, n, rows_per_block)
@@ -84,12 +84,12 @@ def read_block(dataset: h5py.Dataset, block: Block, buffer: np.ndarray) -> np.nd
         The dataset the block was planned on, still open.
     block : Block
         From `plan_blocks`.
-    buffer : (rows, bins) float32, C-contiguous
+    buffer : (rows, bins) of the dataset's dtype, C-contiguous
         Space for at least ``block.stop - block.start`` rows, reused from block to block.
 
     Returns
     -------
-    rows : (block.stop - block.start, bins) float32
+    rows : (block.stop - block.start, bins)
         A view of ``buffer``.
 
     Raises
@@ -124,12 +124,12 @@ def read_columns(
         From `plan_blocks`.
     columns : slice
         The columns wanted.
-    buffer : (rows, bins) float32, C-contiguous
+    buffer : (rows, bins) of the dataset's dtype, C-contiguous
         Space for at least ``block.stop - block.start`` whole rows, used for other layouts.
 
     Returns
     -------
-    values : (block.stop - block.start, len(columns)) float32, C-contiguous
+    values : (block.stop - block.start, len(columns)) of the dataset's dtype, C-contiguous
 
     Raises
     ------
@@ -139,16 +139,16 @@ def read_columns(
     if block.offset is None:
         return np.ascontiguousarray(read_block(dataset, block, buffer)[:, columns])
     shape = (block.stop - block.start, dataset.shape[1])
-    count = shape[0] * shape[1]
+    count, dtype = shape[0] * shape[1], dataset.dtype
     handle = dataset.file.id.get_vfd_handle()
     # A map reaching past the end of the file would kill the process when touched there.
-    if os.fstat(handle).st_size < block.offset + count * _FLOAT32.itemsize:
+    if os.fstat(handle).st_size < block.offset + count * dtype.itemsize:
         raise IndexFileError(f"{dataset.file.filename}: the file ends inside the signatures")
     start = block.offset - block.offset % mmap.ALLOCATIONGRANULARITY
     skip = block.offset - start
-    length = skip + count * _FLOAT32.itemsize
+    length = skip + count * dtype.itemsize
     with mmap.mmap(handle, length, prot=mmap.PROT_READ, offset=start) as mapped:
-        rows = np.frombuffer(mapped, _FLOAT32, count, skip).reshape(shape)
+        rows = np.frombuffer(mapped, dtype, count, skip).reshape(shape)
         values = np.ascontiguousarray(rows[:, columns])
         del rows  # the map closes only once no array views it
     return values
@@ -162,17 +162,17 @@ def read_rows(
     Parameters
     ----------
     dataset : h5py.Dataset
-        A 2-D float32 dataset of shape (N, bins), still open.
+        A 2-D dataset of shape (N, bins), still open.
     blocks : list of Block
         From `plan_blocks` on it.
     rows : (m,) int64
         Distinct row numbers, ascending.
-    out : (m', bins) float32, C-contiguous
+    out : (m', bins) of the dataset's dtype, C-contiguous
         Space for at least m rows.
 
     Returns
     -------
-    rows : (m, bins) float32
+    rows : (m, bins)
         A view of ``out``, in the order of ``rows``.
 
     Raises
@@ -183,14 +183,14 @@ def read_rows(
     got = out[: len(rows)]
     starts = np.array([b.start for b in blocks], np.int64)
     which = np.searchsorted(starts, rows, side="right") - 1
-    row_bytes = dataset.shape[1] * _FLOAT32.itemsize
+    row_bytes = dataset.shape[1] * dataset.dtype.itemsize
     handle = dataset.file.id.get_vfd_handle() if any(b.offset is not None for b in blocks) else -1
     bounds = np.flatnonzero(np.diff(which, prepend=-1, append=len(blocks))).tolist()
     for first, last in zip(bounds[:-1], bounds[1:], strict=True):
         block = blocks[which[first]]
         local = rows[first:last] - block.start
         if block.offset is None or _DENSE * len(local) >= block.stop - block.start:
-            whole = np.empty((block.stop - block.start, dataset.shape[1]), np.float32)
+            whole = np.empty((block.stop - block.start, dataset.shape[1]), dataset.dtype)
             got[first:last] = read_block(dataset, block, whole)[local]
             continue
         breaks = (np.flatnonzero(np.diff(local) != 1) + 1).tolist()
@@ -203,7 +203,7 @@ def read_rows(
 
 
 def _plain(dataset: h5py.Dataset) -> bool:
-    """Whether the dataset's rows are plain native float32 bytes at known file offsets."""
+    """Whether the dataset's rows are plain native float32 or uint16 bytes at known offsets."""
     dcpl = dataset.id.get_create_plist()
     layout = dcpl.get_layout()
     chunked_by_rows = layout == h5py.h5d.CHUNKED and dataset.chunks[1] == dataset.shape[1]
@@ -211,7 +211,7 @@ def _plain(dataset: h5py.Dataset) -> bool:
         hasattr(os, "preadv")  # not on Windows: read through h5py there
         and dataset.file.driver == "sec2"
         and dataset.file.id.get_create_plist().get_userblock() == 0
-        and dataset.dtype == _FLOAT32
+        and dataset.dtype in _PLAIN_TYPES
         and dataset.ndim == 2
         and (layout == h5py.h5d.CONTIGUOUS or chunked_by_rows)
         and dcpl.get_nfilters() == 0
@@ -221,7 +221,7 @@ def _plain(dataset: h5py.Dataset) -> bool:
 
 def _chunk_offsets(dataset: h5py.Dataset) -> dict[int, int]:
     """File offsets of a chunked dataset's allocated, unfiltered chunks, by first row."""
-    full = dataset.chunks[0] * dataset.shape[1] * _FLOAT32.itemsize
+    full = dataset.chunks[0] * dataset.shape[1] * dataset.dtype.itemsize
     infos: list = []
     try:
         dataset.id.chunk_iter(infos.append)

@@ -12,6 +12,7 @@ import threading
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import partial
 from typing import TypeVar
 
 import h5py
@@ -181,7 +182,7 @@ def _scan(
                 best.merge(first + q0, view.start + block.start, dist, live)
 
     width = max((dataset.shape[1] for dataset, _ in sources.values()), default=1)
-    parallel(blocks, work, (block_rows, width))
+    parallel(blocks, work, partial(np.empty, (block_rows, width), np.float32))
 
 
 def _source(view: SegmentView, columns: slice | None) -> tuple[h5py.Dataset, slice | None]:
@@ -251,7 +252,7 @@ class _Pruned:
                 bounds[:, at] = out
 
         width = max(v.sketch.rows.shape[1] for v in self.views if v.sketch)
-        parallel(blocks, work, (block_rows, width))
+        parallel(blocks, work, partial(np.empty, (block_rows, width), np.float32))
         return bounds
 
     def _first(self, j: int, query: np.ndarray, bounds: np.ndarray) -> np.float32:
@@ -302,7 +303,7 @@ class _Pruned:
             if len(local):
                 self._exact(j, query, start + local, buffer, lock)
 
-        parallel(tasks, work, (block_rows, self.width))
+        parallel(tasks, work, partial(np.empty, (block_rows, self.width), np.float32))
 
     def _exact(
         self,
@@ -404,12 +405,13 @@ class _Best:
 
 
 Task = TypeVar("Task")
+Buffer = TypeVar("Buffer")
 
 
 def parallel(
     tasks: list[Task],
-    work: Callable[[Task, np.ndarray, threading.Lock], None],
-    buffer_shape: tuple[int, int],
+    work: Callable[[Task, Buffer, threading.Lock], None],
+    make_buffer: Callable[[], Buffer],
 ) -> None:
     """Run ``work(task, buffer, lock)`` on every task, one thread per core, each with a buffer.
 
@@ -420,15 +422,15 @@ def parallel(
     work : callable
         ``work(task, buffer, lock)``: the buffer is its thread's own, reused from task to task;
         the lock is shared, and ``work`` holds it while it changes shared state.
-    buffer_shape : (int, int)
-        Shape of each thread's float32 buffer.
+    make_buffer : callable
+        Makes a thread's buffer, once per thread.
     """
     if not tasks:
         return
     todo, lock = iter(tasks), threading.Lock()
 
     def run() -> None:
-        buffer = np.empty(buffer_shape, np.float32)
+        buffer = make_buffer()
         while (task := _next(todo, lock)) is not None:
             work(task, buffer, lock)
 

@@ -27,7 +27,8 @@ from functools import partial
 
 import numpy as np
 
-from .cells import cell_histogram, cell_scores, part_scorer
+from .blocks import Block, plan_blocks, read_block
+from .cells import cell_histogram, part_scorer
 from .cfhks import DESIGNS, Design, curvature_histograms, weigh_curvature
 from .conformal import Operators, operators
 from .curvature import smoothed_curvature
@@ -48,7 +49,9 @@ FINE_SHARES = tuple(2.0 ** (-j / 4) for j in range(13))
 # weight").
 HISTOGRAM_WEIGHT = 1.0
 _CELL_BLOCK_ROWS = 4096  # rows of fine cells read at a time, as a segment stores them
-_SCORE_ROWS = 512  # rows of fine cells scored at a time: bounds a search's memory
+_SCORE_ROWS = 512  # rows of fine cells scored at a time: bounds NumPy's scratch memory
+# A thread's space for a block of fine cells: (rows, slots) uint16 cells, float32 fractions.
+_CellBuffers = tuple[np.ndarray, np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -277,37 +280,43 @@ def _nearest_by_cells(
     reader: IndexReader, cells: tuple[tuple[np.ndarray, np.ndarray], ...]
 ) -> tuple[int, float] | None:
     """The row of the smallest partial distance by fine cells, and that distance; the first
-    such row on ties; None for an empty index. Reads every live row's cells, chunk by chunk,
-    one thread per core."""
-    blocks = []
-    rows = 0
+    such row on ties; None for an empty index. Reads every live row's cells, chunk by chunk
+    (`cfsig.blocks`), one thread per core."""
+    tasks: list[tuple[SegmentView, Block, Block]] = []
     for view in reader.segments:
         if view.cells is None:
             raise PartialError(f"{reader.path}: this index keeps no fine curvature cells")
-        size = view.cells[0].shape[0]
-        step = view.cells[0].chunks[0] if view.cells[0].chunks else _CELL_BLOCK_ROWS
-        blocks += [(view, start, min(start + step, size)) for start in range(0, size, step)]
-        rows += size
-    score = part_scorer(cells, FINE_SHARES, rows)
+        plans = [plan_blocks(data, _CELL_BLOCK_ROWS) for data in view.cells]
+        tasks += [(view, *pair) for pair in zip(*plans, strict=True)]
+    score = part_scorer(cells, FINE_SHARES, sum(v.signatures.shape[0] for v in reader.segments))
+    rows = max((b.stop - b.start for _, b, _ in tasks), default=1)
+    slots = max((v.cells[0].shape[1] for v in reader.segments if v.cells), default=1)
     found: list[tuple[float, int]] = []
 
-    def work(task: tuple[SegmentView, int, int], _: np.ndarray, lock: threading.Lock) -> None:
-        view, start, stop = task
-        assert view.cells is not None  # checked above
-        stored, fractions = (data[start:stop] for data in view.cells)
-        scores = np.concatenate(  # a chunk read at once, scored a slice at a time for memory
+    def work(
+        task: tuple[SegmentView, Block, Block], buffers: _CellBuffers, lock: threading.Lock
+    ) -> None:
+        view, block, same = task
+        assert view.cells is not None and block.start == same.start  # one chunking: index.py
+        stored = read_block(view.cells[0], block, buffers[0])
+        fractions = read_block(view.cells[1], same, buffers[1])
+        scores = np.concatenate(
             [
                 score(stored[i : i + _SCORE_ROWS], fractions[i : i + _SCORE_ROWS])
                 for i in range(0, len(stored), _SCORE_ROWS)
             ]
         )
+        start, stop = block.start, block.stop
         scores[view.dead[(view.dead >= start) & (view.dead < stop)] - start] = np.inf
         at = int(np.argmin(scores))
         if np.isfinite(scores[at]):
             with lock:
                 found.append((float(scores[at]), view.start + start + at))
 
-    parallel(blocks, work, (1, 1))
+    def make_buffers() -> _CellBuffers:
+        return np.empty((rows, slots), np.uint16), np.empty((rows, slots), np.float32)
+
+    parallel(tasks, work, make_buffers)
     if not found:
         return None
     best, physical = min(found)
@@ -368,7 +377,7 @@ def partial_distances(
     Returns
     -------
     distances : (N,) float64
-        `partial_scores` of the wholes, or by their fine cells `cfsig.cells.cell_scores`.
+        `partial_scores` of the wholes, or by their fine cells `cfsig.cells.part_scorer`.
 
     Raises
     ------
@@ -378,7 +387,7 @@ def partial_distances(
     if part.cells is not None:
         if cells is None:
             raise ValueError("a part measured by fine cells needs the wholes' cells")
-        return cell_scores(part.cells, FINE_SHARES, *cells)
+        return part_scorer(part.cells, FINE_SHARES, len(cells[0]))(*cells)
     assert part.vectors is not None  # a Part holds one or the other
     stored = np.asarray(signatures, np.float32)[:, curvature_columns(params)]
     distances = l1_distances(share_queries(part.vectors), stored)

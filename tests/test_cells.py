@@ -8,6 +8,7 @@ import h5py
 import numpy as np
 import pytest
 
+from cfsig.blocks import plan_blocks
 from cfsig.cells import (
     FAST_MIN_ROWS,
     SLOTS,
@@ -22,7 +23,7 @@ from cfsig.errors import IndexFileError
 from cfsig.index import Entry, IndexReader, IndexWriter, check_index, convert_index
 from cfsig.mesh import clean_mesh
 from cfsig.params import Params, cell_slots, signature_length
-from cfsig.parts import FINE_SHARES, measure_part
+from cfsig.parts import FINE_SHARES, Part, measure_part, partial_distances, partial_search
 from cfsig.signature import compute_signature
 from tests.helpers import random_signature, torus
 
@@ -215,3 +216,33 @@ def test_damaged_or_missing_cells_are_named(tmp_path):
         del f["cells"]
     with pytest.raises(IndexFileError, match="fine curvature cells are missing"):
         IndexReader(index)
+
+
+@pytest.mark.parametrize("kernel", ["numpy", "numba"])
+def test_partial_search_reads_every_live_rows_cells(tmp_path, monkeypatch, kernel):
+    if kernel == "numba":
+        pytest.importorskip("numba", reason="numba's kernel is the extra cfsig[fast]")
+    monkeypatch.setattr("cfsig.cells.FAST_MIN_ROWS", 0 if kernel == "numba" else 1 << 62)
+    index = tmp_path / "i"
+    with IndexWriter(index, V10) as w:
+        for commit in range(3):
+            for i in range(6):
+                name = f"c{i % 2}/{(commit * 4 + i) % 10}.off"  # some again: dead rows
+                w.add(Entry(name, name[:2], f"/d/{name}"), _signature(50 * commit + i))
+            w.commit()
+    rng = np.random.default_rng(8)
+    with IndexReader(index) as reader:
+        assert len(reader.segments) > 1 and any(len(v.dead) for v in reader.segments)
+        # The cells are read from the file directly (cfsig.blocks), not through h5py.
+        assert all(b.offset is not None for b in plan_blocks(reader.segments[0].cells[0], 4))
+        stored, fractions = reader.cells()
+        view = next(v for v in reader.segments if len(v.dead))
+        dead = (view.cells[0][view.dead[0]], view.cells[1][view.dead[0]])  # superseded
+        for query_cells, query_fractions in [dead, *zip(stored[:4], fractions[:4], strict=True)]:
+            own = query_cells[query_fractions > 0].astype(np.int64)
+            kept = np.sort(rng.choice(own, max(1, len(own) // 2), replace=False))
+            part = Part(cells=((kept, np.full(len(kept), 1 / len(kept))),) * len(FINE_SHARES))
+            expected = partial_distances(part, reader.signatures[:], V10, (stored, fractions))
+            hits, distance = partial_search(reader, part, 3)
+            assert hits[0].entry.name == reader.column("names")[np.argmin(expected)]
+            assert distance == pytest.approx(expected.min(), abs=1e-5)
