@@ -200,10 +200,8 @@ def part_scorer(
 
     Parameters
     ----------
-    part : sequence of (cells, fractions)
-        The part's `cell_histogram` at each share.
-    shares : tuple of float
-        The shares, one per histogram of ``part``.
+    part, shares
+        As `cell_scores`.
     rows : int
         Rows the search will score: from `FAST_MIN_ROWS`, numba's kernel if installed
         (`cfsig.cells_numba.part_scorer`, 10 to 20 times as fast), else `cell_scores`.
