@@ -203,7 +203,7 @@ def part_scorer(
     part, shares
         As `cell_scores`.
     rows : int
-        Rows the search will score: from `FAST_MIN_ROWS`, numba's kernel if installed
+        Rows the search will score: from `FAST_MIN_ROWS`, numba's kernel if it loads
         (`cfsig.cells_numba.part_scorer`, 10 to 20 times as fast), else `cell_scores`.
 
     Returns
@@ -215,7 +215,7 @@ def part_scorer(
     if rows >= FAST_MIN_ROWS:
         try:
             fast = importlib.import_module("cfsig.cells_numba")
-        except ImportError:
+        except (ImportError, RuntimeError):  # not installed; or no folder to cache its code in
             pass
         else:
             scorer: Scorer = fast.part_scorer(part, shares)

@@ -132,9 +132,18 @@ def test_compiled_scores_are_numpys():
     assert np.array_equal(fast(cells[:0], fractions[:0]), np.zeros(0))
 
 
-def test_small_searches_score_with_numpy():
+@pytest.mark.parametrize("numba", ["small search", "not installed", "no cache folder"])
+def test_numpy_scores_without_numba(monkeypatch, numba):
     part = [(np.array([1, 2]), np.array([0.5, 0.5]))]
-    scorer = part_scorer(part, (1.0,), FAST_MIN_ROWS - 1)
+    rows = FAST_MIN_ROWS - 1 if numba == "small search" else FAST_MIN_ROWS
+    error = {"not installed": ImportError, "no cache folder": RuntimeError}.get(numba)
+    if error:
+
+        def fail(name):
+            raise error(f"{name}: as numba raises it")
+
+        monkeypatch.setattr("cfsig.cells.importlib.import_module", fail)
+    scorer = part_scorer(part, (1.0,), rows)
     cells, fractions = np.array([[1, 2]], np.uint16), np.array([[0.5, 0.5]], np.float32)
     assert isinstance(scorer, functools.partial) and scorer.func is cell_scores
     assert scorer(cells, fractions)[0] == pytest.approx(0.0, abs=1e-6)
