@@ -7,6 +7,8 @@ from collections.abc import Callable, Sequence
 import numba
 import numpy as np
 
+_LANES = 16  # float32 values in one AVX-512 vector: shares are padded to a multiple
+
 
 def part_scorer(
     part: Sequence[tuple[np.ndarray, np.ndarray]], shares: tuple[float, ...]
@@ -31,49 +33,49 @@ def part_scorer(
         releases the GIL.
     """
     held = np.unique(np.concatenate([np.asarray(c, np.int64) for c, _ in part]))
-    slot = np.full(1 << 16, -1, np.int32)
-    slot[held] = np.arange(len(held))
-    table = np.zeros((len(shares), len(held)), np.float32)
+    slot = np.zeros(1 << 16, np.uint32)  # a cell's row of the table; 0 for the cells it lacks
+    slot[held] = np.arange(1, len(held) + 1)
+    lanes = -(-len(shares) // _LANES) * _LANES  # whole vectors; a padding share gains nothing
+    table = np.zeros((len(held) + 1, lanes), np.float32)
     for j, (c, p) in enumerate(part):
-        table[j, slot[c]] = p
-    inverse = (1 / np.asarray(shares)).astype(np.float32)
+        table[slot[c], j] = p
+    inverse = np.ones(lanes, np.float32)
+    inverse[: len(shares)] = 1 / np.asarray(shares)
 
     def scorer(cells: np.ndarray, fractions: np.ndarray) -> np.ndarray:
         out = np.empty(len(cells))
-        _scores(slot, table, inverse, cells, fractions, out)
+        _scores(slot, table.ravel(), inverse, cells, fractions, out, lanes)
         return out
 
     return scorer
 
 
 @numba.njit(nogil=True, fastmath=True, boundscheck=False, cache=True)
-def _scores(slot, table, inverse, cells, fractions, out):
-    """``out[i]``: row i's partial distance. Its cells the part holds are gathered first, then
-    summed share by share over those alone, a loop the compiler vectorises."""
+def _scores(slot, table, inverse, cells, fractions, out, lanes):
+    """``out[i]``: row i's partial distance. The row's cells that the part holds are listed
+    first; then each adds its gain at every share to a vector of them, a loop the compiler
+    vectorises because its length, ``lanes``, is not a constant it would unroll."""
     width = cells.shape[1]
-    found = np.empty(width, np.int32)
+    found = np.empty(width, np.uint64)  # where each listed cell's row of the table starts
     whole = np.empty(width, np.float32)
+    gained = np.empty(lanes, np.float32)
     two = np.float32(2)
     for i in range(cells.shape[0]):
         count = 0
         for s in range(width):
-            w = fractions[i, s]
-            if w == 0:  # an empty slot
-                continue
             k = slot[cells[i, s]]
-            if k >= 0:
-                found[count] = k
-                whole[count] = w
-                count += 1
-        best = 0.0
-        for j in range(table.shape[0]):
-            row = table[j]
-            scale = inverse[j]
+            found[count] = np.uint64(k) * np.uint64(lanes)
+            whole[count] = fractions[i, s]
+            count += (k != 0) & (fractions[i, s] != 0)  # an empty slot has no fraction
+        gained[:] = 0
+        for e in range(count):
+            start = found[e]
+            w = whole[e]
             # 3 - score, summed cell by cell: min(f p, w) / f + 2 min(p, w)
-            gained = np.float32(0)
-            for s in range(count):
-                p = row[found[s]]
-                w = whole[s]
-                gained += min(p, w * scale) + two * min(p, w)
-            best = max(best, np.float64(gained))
+            for j in range(lanes):
+                p = table[start + np.uint64(j)]
+                gained[j] += min(p, w * inverse[j]) + two * min(p, w)
+        best = np.float32(0)
+        for j in range(lanes):
+            best = max(best, gained[j])
         out[i] = 3.0 - best
