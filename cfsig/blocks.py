@@ -103,7 +103,7 @@ def read_block(dataset: h5py.Dataset, block: Block, buffer: np.ndarray) -> np.nd
         return out
     handle = dataset.file.id.get_vfd_handle()
     if os.preadv(handle, [out.data.cast("B")], block.offset) != out.nbytes:
-        raise IndexFileError(f"{dataset.file.filename}: the file ends inside the signatures")
+        raise _cut_short(dataset)
     return out
 
 
@@ -143,7 +143,7 @@ def read_columns(
     handle = dataset.file.id.get_vfd_handle()
     # A map reaching past the end of the file would kill the process when touched there.
     if os.fstat(handle).st_size < block.offset + count * dtype.itemsize:
-        raise IndexFileError(f"{dataset.file.filename}: the file ends inside the signatures")
+        raise _cut_short(dataset)
     start = block.offset - block.offset % mmap.ALLOCATIONGRANULARITY
     skip = block.offset - start
     length = skip + count * dtype.itemsize
@@ -198,7 +198,7 @@ def read_rows(
         for a, b in zip([0, *breaks], [*breaks, len(local)], strict=True):
             space = got[first + a : first + b]
             if os.preadv(handle, [space.data.cast("B")], offsets[a]) != space.nbytes:
-                raise IndexFileError(f"{dataset.file.filename}: the file ends inside its rows")
+                raise _cut_short(dataset)
     return got
 
 
@@ -232,3 +232,8 @@ def _chunk_offsets(dataset: h5py.Dataset) -> dict[int, int]:
         for info in infos
         if info.filter_mask == 0 and info.size == full and info.byte_offset is not None
     }
+
+
+def _cut_short(dataset: h5py.Dataset) -> IndexFileError:
+    """The error for a file that ends before the rows of ``dataset`` do."""
+    return IndexFileError(f"{dataset.file.filename}: the file ends inside {dataset.name}")

@@ -2,6 +2,7 @@
 their storage in an index."""
 
 import functools
+import os
 from dataclasses import replace
 
 import h5py
@@ -255,3 +256,18 @@ def test_partial_search_reads_every_live_rows_cells(tmp_path, monkeypatch, kerne
             hits, distance = partial_search(reader, part, 3)
             assert hits[0].entry.name == reader.column("names")[np.argmin(expected)]
             assert distance == pytest.approx(expected.min(), abs=1e-5)
+
+
+def test_cells_cut_short_after_opening_are_a_clear_error(tmp_path):
+    index = tmp_path / "i"
+    with IndexWriter(index, V10) as w:
+        for i in range(6):
+            w.add(Entry(f"c/{i}.off", "c", f"/d/c/{i}.off"), _signature(i))
+    with IndexReader(index) as reader:
+        (segment,) = index.glob("seg-*.h5")
+        fractions = reader.segments[0].cells[1]
+        (block,) = plan_blocks(fractions, 4096)
+        os.truncate(segment, block.offset + 10)
+        part = Part(cells=((np.array([1, 2]), np.array([0.5, 0.5])),) * len(FINE_SHARES))
+        with pytest.raises(IndexFileError, match="ends inside /cell_fractions"):
+            partial_search(reader, part, 3)

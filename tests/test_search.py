@@ -194,9 +194,9 @@ def test_a_file_cut_short_after_opening_is_a_clear_error(tmp_path, monkeypatch):
     with IndexReader(path) as r:
         blocks = plan_blocks(r.segments[0].signatures, 8)
         os.truncate(_segment(path), blocks[-1].offset + 10)
-        with pytest.raises(IndexFileError, match="ends inside the signatures"):
+        with pytest.raises(IndexFileError, match="ends inside /signatures"):
             nearest(r, _histograms(1, 4), 5)
-        with pytest.raises(IndexFileError, match="ends inside the signatures"):
+        with pytest.raises(IndexFileError, match="ends inside /signatures"):
             nearest(r, _histograms(1, 4)[:, :50], 5, slice(0, 50))
 
 
