@@ -41,10 +41,11 @@ def part_scorer(
         table[slot[c], j] = p
     inverse = np.ones(lanes, np.float32)
     inverse[: len(shares)] = 1 / np.asarray(shares)
+    flat = table.ravel()  # the kernel finds a cell's row at ``slot * lanes``
 
     def scorer(cells: np.ndarray, fractions: np.ndarray) -> np.ndarray:
         out = np.empty(len(cells))
-        _scores(slot, table.ravel(), inverse, cells, fractions, out, lanes)
+        _scores(slot, flat, inverse, cells, fractions, out, lanes)
         return out
 
     return scorer
