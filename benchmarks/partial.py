@@ -374,11 +374,13 @@ def scale(rows: int, real: str, folder: Path) -> str:
     ``real`` blended, plus noise), written by its ``build``, of the real index's version. For
     version 9 the query's vectors for the seven shares are the curvature columns of seven more
     such rows; for version 10, whose rows also get fine cells mixed from two real rows'
-    (`index_scale.synthetic_cells`), the query's cells at the 13 shares are 13 more such rows'.
-    Open, `cfsig.parts.partial_search` for 20 results and their names: the first query of the
-    process (imports and compiled code loaded), then three more. For version 10 twice, in two
-    processes, whatever `cfsig.cells.part_scorer` would choose for so many rows: with numba's
-    kernel, and with NumPy's; and a third time scoring nothing, what reading the cells costs.
+    (`index_scale.synthetic_cells`), the query's cells at the 13 shares are 13 more such rows'
+    (the synthetic query), and then the real parts of `real_parts`. Open,
+    `cfsig.parts.partial_search` for 20 results and their names: the first query of the
+    process (imports and compiled code loaded), then three more of each query. For version 10
+    three times, in three processes, whatever `cfsig.cells.part_scorer` would choose for so
+    many rows: with numba's kernel; with NumPy's (the synthetic query alone); and scoring
+    nothing, what reading the cells costs.
     """
     sys.path.insert(0, str(ROOT))
     from benchmarks.index_scale import build, real_rows
@@ -393,21 +395,58 @@ def scale(rows: int, real: str, folder: Path) -> str:
         built = build(path, rows, real_rows(real, params), params, cells)
     how = "reused" if built is None else f"built in {built:.0f} s"
     lines = [f"One partial query over {rows:,} rows of version {params.version} ({how}):"]
+    parts = folder / "partial-real-parts.npz"
+    if cells is not None:
+        names = real_parts(real, parts)
     for kernel in ("numba", "NumPy", "reading alone") if cells is not None else ("",):
-        out = _time_partial(real, path, kernel)
+        out = _time_partial(real, path, kernel, parts if kernel != "NumPy" else None)
         lines.append(
-            f"- {kernel or 'query'}: **{statistics.median(out['times']):.3f} s** (median of 3; "
+            f"- {kernel or 'query'}, synthetic query: **{statistics.median(out['times']):.3f} "
+            "s** (median of 3; "
             + ", ".join(f"{t:.3f}" for t in out["times"])
             + f"); first of the process {out['first']:.3f} s; peak {out['peak_mb']:.0f} MB; "
             f"load average {os.getloadavg()[0]:.1f}."
         )
+        if out["real"]:
+            each = [statistics.median(times) for times in out["real"]]
+            lines.append(
+                f"- {kernel}, real parts: **{statistics.median(each):.3f} s** (median of the "
+                f"{len(each)} parts' medians of 3; {min(each):.3f} to {max(each):.3f})."
+            )
+    if cells is not None:
+        lines.append("Real parts: " + "; ".join(names) + ".")
     return "\n".join(lines)
 
 
-def _time_partial(real: str, path: Path, kernel: str) -> dict:
+def real_parts(real: str, path: Path, count: int = 5) -> list[str]:
+    """Parts of ``count`` meshes of the index ``real`` as the benchmark makes them, a cut and a
+    body with holes of each (rows spread over the index, seeded by their row), measured with
+    its parameters; saved to ``path`` (`Part.cells`, share by share) for `_time_partial`.
+    Returns their names."""
+    from cfsig.index import IndexReader
+
+    with IndexReader(real) as reader:
+        params, n = reader.params, len(reader)
+        rows = np.linspace(0, n - 1, count).astype(int)
+        entries = reader.entries(rows)
+    arrays, names = {}, []
+    for row, entry in zip(rows, entries, strict=True):
+        mesh = read_mesh(entry.path)
+        rng = np.random.default_rng(int(row))
+        for kind, make in (("cut", cut), ("holes", holes)):
+            part = measure_part(make(mesh, rng), params)
+            assert part.cells is not None  # version 10
+            for j, (c, f) in enumerate(part.cells):
+                arrays[f"{len(names)}-{j}-cells"], arrays[f"{len(names)}-{j}-fractions"] = c, f
+            names.append(f"{entry.name} {kind}")
+    np.savez(path, **arrays)
+    return names
+
+
+def _time_partial(real: str, path: Path, kernel: str, parts: Path | None) -> dict:
     """`scale`'s query in a fresh process: the first, then three more; with ``kernel`` for the
     fine cells ("numba" or "NumPy"; "reading alone" scores every row 0), else as cfsig
-    chooses."""
+    chooses. Then three of each real part saved in ``parts`` (`real_parts`), if given."""
     from benchmarks.index_scale import K, in_child
 
     force = {
@@ -431,12 +470,18 @@ if cells is None:
 else:
     held = synthetic_cells(rng, len(FINE_SHARES), cells)
     part = Part(cells=tuple((c[f > 0].astype(np.int64), f[f > 0] / f.sum()) for c, f in held))
-def once():
+def once(part):
     t = time.perf_counter()
     with IndexReader({str(path)!r}) as r:
         hits, _ = partial_search(r, part, {K})
     return time.perf_counter() - t
-out = {{'first': once(), 'times': [once() for _ in range(3)]}}
+out = {{'first': once(part), 'times': [once(part) for _ in range(3)], 'real': []}}
+if {str(parts) if parts else ""!r}:
+    saved = np.load({str(parts)!r})
+    for i in range(len(saved.files) // (2 * len(FINE_SHARES))):
+        shares = [(saved[f"{{i}}-{{j}}-cells"], saved[f"{{i}}-{{j}}-fractions"])
+                  for j in range(len(FINE_SHARES))]
+        out['real'].append([once(Part(cells=tuple(shares))) for _ in range(3)])
 """
     return in_child(code)
 

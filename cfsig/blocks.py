@@ -6,7 +6,10 @@ file without a user block, read by the default driver), a block is read from the
 HDF5 in between. With a thread per core this scanned faster than memory-mapping each block,
 though one thread alone reads mapped blocks faster (`docs/query-options.md`); some columns
 of a block (`read_columns`) are copied from a memory map, which reads only those
-(docs/partial.md, "Scale"). Any other layout (compressed, compact, external, non-native byte
+(docs/partial.md, "Scale"); and the fine cells, which a partial query reads whole and scores
+where they lie, are viewed in one memory map of their file (`map_file`, `mapped_block`), its
+page table filled a block at a time: no copy at all (docs/partial.md, "Version 10: vector
+code"). Any other layout (compressed, compact, external, non-native byte
 order, chunks not yet allocated) is read through h5py into the same buffer. Reading at fixed
 offsets is safe because the files of an index are never modified: a commit adds a segment file
 and renames a new manifest into place, and a merge deletes the files it replaced, which stay
@@ -15,8 +18,10 @@ readable through the open file.
 
 from __future__ import annotations
 
+import contextlib
 import mmap
 import os
+import sys
 from dataclasses import dataclass
 
 import h5py
@@ -25,6 +30,9 @@ import numpy as np
 from .errors import IndexFileError
 
 _PLAIN_TYPES = (np.dtype(np.float32), np.dtype(np.uint16))  # native: the bytes are the values
+# MADV_POPULATE_READ (Linux 5.14, not in Python's mmap module): a block's page table filled in
+# one call, not a fault per 64 KB (docs/partial.md, "Version 10: vector code").
+_POPULATE_READ = 22
 _DENSE = 4  # `read_rows` reads a whole block when it wants a quarter of its rows or more
 
 
@@ -105,6 +113,57 @@ def read_block(dataset: h5py.Dataset, block: Block, buffer: np.ndarray) -> np.nd
     if os.preadv(handle, [out.data.cast("B")], block.offset) != out.nbytes:
         raise _cut_short(dataset)
     return out
+
+
+def map_file(dataset: h5py.Dataset) -> mmap.mmap:
+    """A read-only memory map of the whole file that holds ``dataset``.
+
+    Parameters
+    ----------
+    dataset : h5py.Dataset
+        A dataset of an open file whose rows are plain bytes (its blocks have offsets).
+
+    Returns
+    -------
+    mapped : mmap.mmap
+        Unmapped once it and every array that views it (`mapped_block`) are gone.
+    """
+    return mmap.mmap(dataset.file.id.get_vfd_handle(), 0, prot=mmap.PROT_READ)
+
+
+def mapped_block(dataset: h5py.Dataset, block: Block, mapped: mmap.mmap) -> np.ndarray:
+    """The rows of one block, read in place from a memory map of their file: no copy.
+
+    Parameters
+    ----------
+    dataset : h5py.Dataset
+        The dataset the block was planned on.
+    block : Block
+        From `plan_blocks`, with an offset (plain rows).
+    mapped : mmap.mmap
+        `map_file` of the dataset.
+
+    Returns
+    -------
+    rows : (block.stop - block.start, bins) of the dataset's dtype, read-only
+        A view of ``mapped``.
+
+    Raises
+    ------
+    IndexFileError
+        The file ended before the block's end when it was mapped.
+    """
+    assert block.offset is not None  # plain rows
+    count = (block.stop - block.start) * dataset.shape[1]
+    end = block.offset + count * dataset.dtype.itemsize
+    if end > len(mapped):  # a page touched past the end of the map would kill the process
+        raise _cut_short(dataset)
+    if sys.platform == "linux":
+        start = block.offset - block.offset % mmap.PAGESIZE
+        with contextlib.suppress(OSError):  # before Linux 5.14: a fault per 64 KB, as without
+            mapped.madvise(_POPULATE_READ, start, end - start)
+    rows = np.frombuffer(mapped, dataset.dtype, count, block.offset)
+    return rows.reshape(-1, dataset.shape[1])
 
 
 def read_columns(

@@ -1,4 +1,16 @@
-"""The fine-cell kernel of numba (optional extra ``cfsig[fast]``); see `cfsig.cells`."""
+"""The fine-cell kernel of numba (optional extra ``cfsig[fast]``); see `cfsig.cells`.
+
+Each row takes two steps, both written as LLVM vector code (`numba.extending.intrinsic`):
+numba's own loops spent half their time on runtime checks that the accumulated gains do not
+overlap the part's table, and listed the cells one at a time (docs/partial.md, "Version 10:
+vector code").
+
+- `_list_held`, 16 slots at a time: each cell's row of the part's table, then the slots the
+  part holds (a row other than 0, a fraction other than 0) stored one after another with
+  their fractions (a compress store).
+- `_best_gain`: the gains of the listed cells at all 16 lanes of shares, summed in registers
+  four cells a pass; their largest.
+"""
 
 from __future__ import annotations
 
@@ -6,8 +18,21 @@ from collections.abc import Callable, Sequence
 
 import numba
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
-_LANES = 16  # float32 values in one AVX-512 vector: shares are padded to a multiple
+_LANES = 16  # shares a vector holds: a part has at most that many, padded
+_ALIGN = 64  # bytes: a table row is one cache line
+_FLOAT = ir.FloatType()
+_INT = ir.IntType(32)
+_WIDE = ir.IntType(64)
+_FLOATS = ir.VectorType(_FLOAT, _LANES)
+_INTS = ir.VectorType(_INT, _LANES)
+_MASK = ir.VectorType(ir.IntType(1), _LANES)
+_FAST = ("contract",)  # fused multiply-adds; sums in the order written: one addition a pass
+# chained per sum, not three
 
 
 def part_scorer(
@@ -23,7 +48,7 @@ def part_scorer(
     part : sequence of (cells, fractions)
         The part's `cfsig.cells.cell_histogram` at each share, cells below 65,536.
     shares : tuple of float
-        The shares, one per histogram of ``part``.
+        The shares, one per histogram of ``part``, at most 16.
 
     Returns
     -------
@@ -31,59 +56,152 @@ def part_scorer(
         ``scorer(cells, fractions)``: the wholes' (m, slots) uint16 `cfsig.cells.packed_cells`
         and their (m, slots) float32 fractions to their (m,) float64 scores, in [0, 3];
         releases the GIL.
+
+    Raises
+    ------
+    ValueError
+        More than 16 shares.
     """
+    if len(shares) > _LANES:
+        raise ValueError(f"{len(shares)} shares: numba's kernel takes at most {_LANES}")
     held = np.unique(np.concatenate([np.asarray(c, np.int64) for c, _ in part]))
     slot = np.zeros(1 << 16, np.uint32)  # a cell's row of the table; 0 for the cells it lacks
     slot[held] = np.arange(1, len(held) + 1)
-    lanes = -(-len(shares) // _LANES) * _LANES  # whole vectors; a padding share gains nothing
-    table = np.zeros((len(held) + 1, lanes), np.float32)
+    table = _aligned_zeros((len(held) + 1) * _LANES).reshape(-1, _LANES)
     for j, (c, p) in enumerate(part):
         table[slot[c], j] = p
-    inverse = np.ones(lanes, np.float32)
+    inverse = np.ones(_LANES, np.float32)  # a padding share's table is 0: it gains nothing
     inverse[: len(shares)] = 1 / np.asarray(shares)
-    flat = table.ravel()  # the kernel finds a cell's row at ``slot * lanes``
+    flat = table.ravel()
 
     def scorer(cells: np.ndarray, fractions: np.ndarray) -> np.ndarray:
         out = np.empty(len(cells))
-        _scores(slot, flat, inverse, cells, fractions, out, lanes)
+        cells, fractions = np.ascontiguousarray(cells), np.ascontiguousarray(fractions)
+        _scores(slot, flat, inverse, cells.reshape(-1), fractions.reshape(-1), out)
         return out
 
     return scorer
 
 
-@numba.njit(nogil=True, fastmath=True, boundscheck=False, cache=True)
-def _scores(slot, table, inverse, cells, fractions, out, lanes):
-    """``out[i]``: row i's partial distance. The row's cells that the part holds are listed
-    first, padded to a multiple of four by the table's empty row 0; then every four cells add
-    their gains at all shares to a vector of them, so that the vector is loaded and stored once
-    per four cells. The compiler vectorises that loop because its length, ``lanes``, is not a
-    constant it would unroll."""
-    width = cells.shape[1]
-    found = np.zeros(width + 4, np.uint64)  # where each listed cell's row of the table starts
+def _aligned_zeros(count: int) -> np.ndarray:
+    """(count,) float32 zeros starting on a cache line."""
+    spare = np.zeros(count + _ALIGN // 4, np.float32)
+    skip = (-spare.ctypes.data % _ALIGN) // 4
+    return spare[skip : skip + count]
+
+
+@numba.njit(nogil=True, boundscheck=False, cache=True)
+def _scores(slot, table, inverse, cells, fractions, out):
+    """``out[i]``: row i's partial distance; ``cells`` and ``fractions`` hold the rows one after
+    another. The slots past the last whole vector of 16 are listed one by one."""
+    width = len(cells) // max(len(out), 1)
+    found = np.zeros(width + 4, np.uint32)  # the listed cells' rows of the table, then 0s
     whole = np.zeros(width + 4, np.float32)
-    gained = np.empty(lanes, np.float32)
-    two = np.float32(2)
-    for i in range(cells.shape[0]):
+    vectors = width - width % _LANES
+    for i in range(len(out)):
+        start = i * width
         count = 0
-        for s in range(width):
-            k = slot[cells[i, s]]
-            found[count] = np.uint64(k) * np.uint64(lanes)
-            whole[count] = fractions[i, s]
-            count += (k != 0) & (fractions[i, s] != 0)  # an empty slot has no fraction
-        found[count : count + 4] = 0
+        for s in range(start, start + vectors, _LANES):
+            count = _list_held(slot, cells, fractions, s, found, whole, count)
+        for s in range(start + vectors, start + width):
+            k = slot[cells[s]]
+            found[count], whole[count] = k, fractions[s]
+            count += (k != 0) & (fractions[s] != 0)
+        found[count : count + 4] = 0  # padding: the table's row 0 gains nothing
         whole[count : count + 4] = 0
-        gained[:] = 0
-        for e in range(0, count, 4):
-            a, b, c, d = found[e], found[e + 1], found[e + 2], found[e + 3]
-            wa, wb, wc, wd = whole[e], whole[e + 1], whole[e + 2], whole[e + 3]
-            for j in range(lanes):
-                # 3 - score, summed cell by cell: min(f p, w) / f + 2 min(p, w)
-                at, to = np.uint64(j), inverse[j]  # 1 / f
-                pa, pb, pc, pd = table[a + at], table[b + at], table[c + at], table[d + at]
-                gained[j] += (
-                    min(pa, wa * to) + two * min(pa, wa) + min(pb, wb * to) + two * min(pb, wb)
-                ) + (min(pc, wc * to) + two * min(pc, wc) + min(pd, wd * to) + two * min(pd, wd))
-        best = np.float32(0)
-        for j in range(lanes):
-            best = max(best, gained[j])
-        out[i] = 3.0 - best
+        out[i] = 3.0 - _best_gain(table, inverse, found, whole, count)
+
+
+def _pointer(context, builder, array_type, array):
+    """The data pointer of a numba array."""
+    return context.make_array(array_type)(context, builder, array).data
+
+
+def _load_vector(builder, pointer, at):
+    """The 16 float32 at ``pointer + at``."""
+    start = builder.bitcast(builder.gep(pointer, [at]), _FLOATS.as_pointer())
+    return builder.load(start, align=4)
+
+
+def _splat(builder, value):
+    """16 copies of a float32."""
+    one = builder.insert_element(ir.Constant(_FLOATS, ir.Undefined), value, _INT(0))
+    return builder.shuffle_vector(one, one, ir.Constant(_INTS, [0] * _LANES))
+
+
+def _minimum(builder, a, b):
+    """Lane by lane, as one ``vminps``."""
+    return builder.select(builder.fcmp_ordered("<", a, b), a, b)
+
+
+@intrinsic
+def _list_held(typingctx, slot, cells, fractions, at, found, whole, count):
+    """List the slots ``at`` to ``at + 16`` that the part holds after the ``count`` listed:
+    their table rows in ``found``, their fractions in ``whole``; the new count."""
+
+    def codegen(context, builder, signature, args):
+        slots, rows, shares, at, listed, wholes, count = (
+            _pointer(context, builder, t, a) if isinstance(t, types.Array) else a
+            for t, a in zip(signature.args, args, strict=True)
+        )
+        held = ir.Constant(_INTS, ir.Undefined)
+        for j in range(_LANES):
+            cell = builder.load(builder.gep(rows, [builder.add(at, at.type(j))]))
+            k = builder.load(builder.gep(slots, [builder.zext(cell, _WIDE)]))
+            held = builder.insert_element(held, k, _INT(j))
+        fraction = _load_vector(builder, shares, at)
+        keep = builder.and_(
+            builder.icmp_unsigned("!=", held, ir.Constant(_INTS, [0] * _LANES)),
+            builder.fcmp_unordered("!=", fraction, ir.Constant(_FLOATS, [0.0] * _LANES)),
+        )
+        for values, into, kind in ((held, listed, "i32"), (fraction, wholes, "f32")):
+            store = cgutils.get_or_insert_function(
+                builder.module,
+                ir.FunctionType(ir.VoidType(), [values.type, into.type, _MASK]),
+                f"llvm.masked.compressstore.v{_LANES}{kind}",
+            )
+            builder.call(store, [values, builder.gep(into, [count]), keep])
+        kept = builder.ctpop(builder.bitcast(keep, ir.IntType(_LANES)))
+        return builder.add(count, builder.zext(kept, _WIDE))
+
+    return types.int64(slot, cells, fractions, at, found, whole, count), codegen
+
+
+@intrinsic
+def _best_gain(typingctx, table, inverse, found, whole, count):
+    """The largest over the shares of ``3 - score``, summed cell by cell over the ``count``
+    listed cells (padded to a multiple of 4): ``min(f p, w) / f + 2 min(p, w)``."""
+
+    def codegen(context, builder, signature, args):
+        rows, inverses, listed, wholes, count = (
+            _pointer(context, builder, t, a) if isinstance(t, types.Array) else a
+            for t, a in zip(signature.args, args, strict=True)
+        )
+        inverse = _load_vector(builder, inverses, _WIDE(0))
+        two = ir.Constant(_FLOATS, [2.0] * _LANES)
+        # Two sums, each of two cells a pass: LLVM keeps them in registers.
+        sums = [
+            cgutils.alloca_once_value(builder, ir.Constant(_FLOATS, [0.0] * _LANES))
+            for _ in range(2)
+        ]
+        with cgutils.for_range_slice(builder, count.type(0), count, count.type(4)) as (e, _):
+            for half, total in enumerate(sums):
+                gains = []
+                for q in (2 * half, 2 * half + 1):
+                    at = builder.add(e, e.type(q))
+                    k = builder.zext(builder.load(builder.gep(listed, [at])), _WIDE)
+                    p = _load_vector(builder, rows, builder.mul(k, _WIDE(_LANES)))
+                    w = _splat(builder, builder.load(builder.gep(wholes, [at])))
+                    explained = _minimum(builder, p, builder.fmul(w, inverse))
+                    common = builder.fmul(two, _minimum(builder, p, w), flags=_FAST)
+                    gains.append(builder.fadd(explained, common, flags=_FAST))
+                pair = builder.fadd(gains[0], gains[1])
+                builder.store(builder.fadd(builder.load(total), pair), total)
+        gained = builder.fadd(builder.load(sums[0]), builder.load(sums[1]))
+        best = builder.extract_element(gained, _INT(0))
+        for j in range(1, _LANES):
+            lane = builder.extract_element(gained, _INT(j))
+            best = builder.select(builder.fcmp_ordered(">", lane, best), lane, best)
+        return best
+
+    return types.float32(table, inverse, found, whole, count), codegen

@@ -20,6 +20,7 @@ Only ``cfhks`` version 3 and later store the curvature channel (docs/method.md).
 
 from __future__ import annotations
 
+import mmap
 import os
 import threading
 from dataclasses import dataclass
@@ -27,7 +28,7 @@ from functools import partial
 
 import numpy as np
 
-from .blocks import Block, plan_blocks, read_block
+from .blocks import Block, map_file, mapped_block, plan_blocks, read_block
 from .cells import cell_histogram, part_scorer
 from .cfhks import DESIGNS, Design, curvature_histograms, weigh_curvature
 from .conformal import Operators, operators
@@ -52,6 +53,9 @@ _CELL_BLOCK_ROWS = 4096  # rows of fine cells read at a time, as a segment store
 _SCORE_ROWS = 512  # rows of fine cells scored at a time: bounds NumPy's scratch memory
 # A thread's space for a block of fine cells: (rows, slots) uint16 cells, float32 fractions.
 _CellBuffers = tuple[np.ndarray, np.ndarray]
+# A block of fine cells to score: its segment, its blocks of cells and of fractions, and the
+# memory map of the segment's file where they are plain bytes.
+_CellTask = tuple[SegmentView, Block, Block, mmap.mmap | None]
 
 
 @dataclass(frozen=True)
@@ -281,25 +285,30 @@ def _nearest_by_cells(
 ) -> tuple[int, float] | None:
     """The row of the smallest partial distance by fine cells, and that distance; the first
     such row on ties; None for an empty index. Reads every live row's cells, chunk by chunk
-    (`cfsig.blocks`), one thread per core."""
-    tasks: list[tuple[SegmentView, Block, Block]] = []
+    (`cfsig.blocks`), one thread per core: in place from a memory map of each segment file
+    where they are plain bytes, else through a buffer."""
+    tasks: list[_CellTask] = []
     for view in reader.segments:
         if view.cells is None:
             raise PartialError(f"{reader.path}: this index keeps no fine curvature cells")
         plans = [plan_blocks(data, _CELL_BLOCK_ROWS) for data in view.cells]
-        tasks += [(view, *pair) for pair in zip(*plans, strict=True)]
+        plain = all(b.offset is not None for plan in plans for b in plan)
+        mapped = map_file(view.cells[0]) if plain and plans[0] else None
+        tasks += [(view, *pair, mapped) for pair in zip(*plans, strict=True)]
     score = part_scorer(cells, FINE_SHARES, sum(v.signatures.shape[0] for v in reader.segments))
-    rows = max((b.stop - b.start for _, b, _ in tasks), default=1)
+    rows = max((b.stop - b.start for _, b, _, m in tasks if m is None), default=0)
     slots = max((v.cells[0].shape[1] for v in reader.segments if v.cells), default=1)
     found: list[tuple[float, int]] = []
 
-    def work(
-        task: tuple[SegmentView, Block, Block], buffers: _CellBuffers, lock: threading.Lock
-    ) -> None:
-        view, block, same = task
+    def work(task: _CellTask, buffers: _CellBuffers, lock: threading.Lock) -> None:
+        view, block, same, mapped = task
         assert view.cells is not None and block.start == same.start  # one chunking: index.py
-        stored = read_block(view.cells[0], block, buffers[0])
-        fractions = read_block(view.cells[1], same, buffers[1])
+        if mapped is None:
+            stored = read_block(view.cells[0], block, buffers[0])
+            fractions = read_block(view.cells[1], same, buffers[1])
+        else:
+            stored = mapped_block(view.cells[0], block, mapped)
+            fractions = mapped_block(view.cells[1], same, mapped)
         scores = np.concatenate(
             [
                 score(stored[i : i + _SCORE_ROWS], fractions[i : i + _SCORE_ROWS])
