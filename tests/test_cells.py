@@ -103,7 +103,8 @@ def test_cell_scores_are_the_partial_distance():
     assert same[0] == pytest.approx(0.0, abs=1e-6)  # a whole is its own part at share 1
 
 
-def test_compiled_scores_are_numpys():
+@pytest.mark.parametrize("slots", [400, 407])  # whole vectors of 16 slots, and 7 left over
+def test_compiled_scores_are_numpys(slots):
     pytest.importorskip("numba", reason="numba's kernel is the extra cfsig[fast]")
     rng = np.random.default_rng(5)
     size, shares = 3000, FINE_SHARES
@@ -114,10 +115,10 @@ def test_compiled_scores_are_numpys():
         return c, w / w.sum()
 
     part = [histogram(200) for _ in shares]
-    cells = np.zeros((300, 400), np.uint16)
-    fractions = np.zeros((300, 400), np.float32)
+    cells = np.zeros((300, slots), np.uint16)
+    fractions = np.zeros((300, slots), np.float32)
     for row in range(len(cells)):
-        c, w = histogram(int(rng.integers(1, 400)))
+        c, w = histogram(int(rng.integers(1, slots)))
         if row % 3 == 0:  # some of them the part's own cells, so that the scores spread
             c, w = part[row % len(shares)]
         w = w.copy()
@@ -131,6 +132,13 @@ def test_compiled_scores_are_numpys():
     assert np.allclose(got, expected, atol=1e-5)
     assert np.argmin(got) == np.argmin(expected)
     assert np.array_equal(fast(cells[:0], fractions[:0]), np.zeros(0))
+
+
+def test_compiled_scores_take_16_shares_at_most():
+    cells_numba = pytest.importorskip("cfsig.cells_numba", reason="the extra cfsig[fast]")
+    part = [(np.array([1, 2]), np.array([0.5, 0.5]))] * 17
+    with pytest.raises(ValueError, match="17 shares"):
+        cells_numba.part_scorer(part, (1.0,) * 17)
 
 
 @pytest.mark.parametrize("numba", ["small search", "not installed", "no cache folder"])
@@ -252,6 +260,33 @@ def test_partial_search_reads_every_live_rows_cells(tmp_path, monkeypatch, kerne
             own = query_cells[query_fractions > 0].astype(np.int64)
             kept = np.sort(rng.choice(own, max(1, len(own) // 2), replace=False))
             part = Part(cells=((kept, np.full(len(kept), 1 / len(kept))),) * len(FINE_SHARES))
+            expected = partial_distances(part, reader.signatures[:], V10, (stored, fractions))
+            hits, distance = partial_search(reader, part, 3)
+            assert hits[0].entry.name == reader.column("names")[np.argmin(expected)]
+            assert distance == pytest.approx(expected.min(), abs=1e-5)
+
+
+@pytest.mark.parametrize("kernel", ["numpy", "numba"])
+def test_partial_search_reads_compressed_cells_through_h5py(tmp_path, monkeypatch, kernel):
+    if kernel == "numba":
+        pytest.importorskip("numba", reason="numba's kernel is the extra cfsig[fast]")
+    monkeypatch.setattr("cfsig.cells.FAST_MIN_ROWS", 0 if kernel == "numba" else 1 << 62)
+    index = tmp_path / "i"
+    with IndexWriter(index, V10) as w:
+        for i in range(12):
+            w.add(Entry(f"c/{i}.off", "c", f"/d/c/{i}.off"), _signature(i))
+    (segment,) = index.glob("seg-*.h5")
+    with h5py.File(segment, "a") as f:  # as another writer of HDF5 might store them
+        for name in ("cells", "cell_fractions"):
+            data = f[name][:]
+            del f[name]
+            f.create_dataset(name, data=data, chunks=(5, data.shape[1]), compression="gzip")
+    with IndexReader(index) as reader:
+        assert all(b.offset is None for b in plan_blocks(reader.segments[0].cells[0], 4))
+        stored, fractions = reader.cells()
+        for row in (3, 7):
+            own = stored[row][fractions[row] > 0].astype(np.int64)[::2]
+            part = Part(cells=((own, np.full(len(own), 1 / len(own))),) * len(FINE_SHARES))
             expected = partial_distances(part, reader.signatures[:], V10, (stored, fractions))
             hits, distance = partial_search(reader, part, 3)
             assert hits[0].entry.name == reader.column("names")[np.argmin(expected)]
