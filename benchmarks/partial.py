@@ -383,8 +383,9 @@ def scale(rows: int, real: str, folder: Path) -> str:
     nothing, what reading the cells costs.
     """
     sys.path.insert(0, str(ROOT))
-    from benchmarks.index_scale import build, real_rows
+    from benchmarks.index_scale import build, real_rows, synthetic_cells
     from cfsig.index import IndexReader
+    from cfsig.parts import FINE_SHARES
 
     with IndexReader(real) as reader:
         params, cells = reader.params, reader.cells()
@@ -414,7 +415,23 @@ def scale(rows: int, real: str, folder: Path) -> str:
                 f"{len(each)} parts' medians of 3; {min(each):.3f} to {max(each):.3f})."
             )
     if cells is not None:
-        lines.append("Real parts: " + "; ".join(names) + ".")
+        synthetic = synthetic_cells(np.random.default_rng(6), len(FINE_SHARES), cells)
+        saved = np.load(parts)
+        distinct = [
+            len(
+                np.unique(
+                    np.concatenate([saved[f"{i}-{j}-cells"] for j in range(len(FINE_SHARES))])
+                )
+            )
+            for i in range(len(names))
+        ]
+        lines += [
+            "Real parts: " + "; ".join(names) + ".",
+            f"Distinct cells over the 13 shares: synthetic query "
+            f"{len(np.unique(np.concatenate([c[f > 0] for c, f in synthetic])))}; real parts "
+            "median "
+            f"{statistics.median(distinct):.0f} ({min(distinct)} to {max(distinct)}).",
+        ]
     return "\n".join(lines)
 
 
