@@ -1,9 +1,9 @@
 """The fine-cell kernel of numba (optional extra ``cfsig[fast]``); see `cfsig.cells`.
 
 Each row takes two steps, both written as LLVM vector code (`numba.extending.intrinsic`):
-numba's own loops spent half their time on runtime checks that the accumulated gains do not
-overlap the part's table, and listed the cells one at a time (docs/partial.md, "Version 10:
-vector code").
+numba's own loops checked, for every four cells, that the sums did not overlap the part's
+table, and listed the cells one slot at a time; this kernel takes half their time
+(docs/partial.md, "Version 10: vector code").
 
 - `_list_held`, 16 slots at a time: each cell's row of the part's table, then the slots the
   part holds (a row other than 0, a fraction other than 0) stored one after another with
@@ -31,8 +31,9 @@ _WIDE = ir.IntType(64)
 _FLOATS = ir.VectorType(_FLOAT, _LANES)
 _INTS = ir.VectorType(_INT, _LANES)
 _MASK = ir.VectorType(ir.IntType(1), _LANES)
-_FAST = ("contract",)  # fused multiply-adds; sums in the order written: one addition a pass
-# chained per sum, not three
+# A multiplication and an addition may fuse, but no sum is reordered: each waits on one addition
+# a pass of four cells, where a free reordering chained three.
+_FUSE = ("contract",)
 
 
 def part_scorer(
@@ -130,7 +131,7 @@ def _splat(builder, value):
 
 
 def _minimum(builder, a, b):
-    """Lane by lane, as one ``vminps``."""
+    """Lane by lane: one instruction."""
     return builder.select(builder.fcmp_ordered("<", a, b), a, b)
 
 
@@ -193,8 +194,8 @@ def _best_gain(typingctx, table, inverse, found, whole, count):
                     p = _load_vector(builder, rows, builder.mul(k, _WIDE(_LANES)))
                     w = _splat(builder, builder.load(builder.gep(wholes, [at])))
                     explained = _minimum(builder, p, builder.fmul(w, inverse))
-                    common = builder.fmul(two, _minimum(builder, p, w), flags=_FAST)
-                    gains.append(builder.fadd(explained, common, flags=_FAST))
+                    common = builder.fmul(two, _minimum(builder, p, w), flags=_FUSE)
+                    gains.append(builder.fadd(explained, common, flags=_FUSE))
                 pair = builder.fadd(gains[0], gains[1])
                 builder.store(builder.fadd(builder.load(total), pair), total)
         gained = builder.fadd(builder.load(sums[0]), builder.load(sums[1]))
