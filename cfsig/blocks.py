@@ -115,7 +115,7 @@ def read_block(dataset: h5py.Dataset, block: Block, buffer: np.ndarray) -> np.nd
     return out
 
 
-def map_file(dataset: h5py.Dataset) -> mmap.mmap:
+def map_file(dataset: h5py.Dataset) -> mmap.mmap | None:
     """A read-only memory map of the whole file that holds ``dataset``.
 
     Parameters
@@ -125,10 +125,14 @@ def map_file(dataset: h5py.Dataset) -> mmap.mmap:
 
     Returns
     -------
-    mapped : mmap.mmap
-        Unmapped once it and every array that views it (`mapped_block`) are gone.
+    mapped : mmap.mmap or None
+        Unmapped once it and every array that views it (`mapped_block`) are gone; None where
+        the file cannot be mapped (a file system without memory maps): read its blocks instead.
     """
-    return mmap.mmap(dataset.file.id.get_vfd_handle(), 0, prot=mmap.PROT_READ)
+    try:
+        return mmap.mmap(dataset.file.id.get_vfd_handle(), 0, prot=mmap.PROT_READ)
+    except (OSError, ValueError):
+        return None
 
 
 def mapped_block(dataset: h5py.Dataset, block: Block, mapped: mmap.mmap) -> np.ndarray:

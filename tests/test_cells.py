@@ -293,6 +293,25 @@ def test_partial_search_reads_compressed_cells_through_h5py(tmp_path, monkeypatc
             assert distance == pytest.approx(expected.min(), abs=1e-5)
 
 
+def test_partial_search_without_memory_maps_reads_the_blocks(tmp_path, monkeypatch):
+    index = tmp_path / "i"
+    with IndexWriter(index, V10) as w:
+        for i in range(8):
+            w.add(Entry(f"c/{i}.off", "c", f"/d/c/{i}.off"), _signature(i))
+    with IndexReader(index) as reader:
+        stored, fractions = reader.cells()
+        own = stored[5][fractions[5] > 0].astype(np.int64)[::3]
+        part = Part(cells=((own, np.full(len(own), 1 / len(own))),) * len(FINE_SHARES))
+        mapped, _ = partial_search(reader, part, 3)
+
+        def refuse(*args, **kwargs):
+            raise OSError("this file system has no memory maps")
+
+        monkeypatch.setattr("cfsig.blocks.mmap.mmap", refuse)
+        read, _ = partial_search(reader, part, 3)
+        assert [h.entry.name for h in read] == [h.entry.name for h in mapped]
+
+
 def test_cells_cut_short_after_opening_are_a_clear_error(tmp_path):
     index = tmp_path / "i"
     with IndexWriter(index, V10) as w:
