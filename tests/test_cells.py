@@ -3,6 +3,9 @@ their storage in an index."""
 
 import functools
 import os
+import subprocess
+import sys
+import textwrap
 from dataclasses import replace
 
 import h5py
@@ -132,6 +135,39 @@ def test_compiled_scores_are_numpys(slots):
     assert np.allclose(got, expected, atol=1e-5)
     assert np.argmin(got) == np.argmin(expected)
     assert np.array_equal(fast(cells[:0], fractions[:0]), np.zeros(0))
+
+
+@pytest.mark.parametrize("cpu", ["x86-64", "haswell"])  # SSE2 only; AVX2 without AVX-512
+def test_compiled_scores_on_older_processors(tmp_path, cpu):
+    pytest.importorskip("numba", reason="numba's kernel is the extra cfsig[fast]")
+    if os.uname().machine != "x86_64":
+        pytest.skip("the processors named are x86's")
+    code = textwrap.dedent(
+        """
+        import numpy as np
+        from cfsig.cells import cell_scores
+        from cfsig.cells_numba import part_scorer
+        from cfsig.parts import FINE_SHARES
+        rng = np.random.default_rng(3)
+        def histogram(count):
+            c = np.sort(rng.choice(3000, count, replace=False))
+            w = rng.random(count)
+            return c, w / w.sum()
+        part = [histogram(200) for _ in FINE_SHARES]
+        cells, fractions = np.zeros((50, 407), np.uint16), np.zeros((50, 407), np.float32)
+        for row in range(50):
+            c, w = histogram(int(rng.integers(1, 407)))
+            cells[row, : len(c)], fractions[row, : len(c)] = c, w
+        got = part_scorer(part, FINE_SHARES)(cells, fractions)
+        print(np.abs(got - cell_scores(part, FINE_SHARES, cells, fractions)).max())
+        """
+    )
+    env = {**os.environ, "NUMBA_CPU_NAME": cpu, "NUMBA_CPU_FEATURES": ""}
+    env["NUMBA_CACHE_DIR"] = str(tmp_path)  # code compiled for another processor kept apart
+    done = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    assert float(done.stdout) < 1e-5
 
 
 def test_compiled_scores_take_16_shares_at_most():
