@@ -47,6 +47,7 @@ os.environ.update(
 
 import argparse
 import collections
+import pickle
 import statistics
 import subprocess
 import sys
@@ -396,9 +397,9 @@ def scale(rows: int, real: str, folder: Path) -> str:
         built = build(path, rows, real_rows(real, params), params, cells)
     how = "reused" if built is None else f"built in {built:.0f} s"
     lines = [f"One partial query over {rows:,} rows of version {params.version} ({how}):"]
-    parts = folder / "partial-real-parts.npz"
+    parts = folder / "partial-real-parts.pickle"
     if cells is not None:
-        names = real_parts(real, parts)
+        named = real_parts(real, parts)
     for kernel in ("numba", "NumPy", "reading alone") if cells is not None else ("",):
         out = _time_partial(real, path, kernel, parts if kernel != "NumPy" else None)
         lines.append(
@@ -416,54 +417,45 @@ def scale(rows: int, real: str, folder: Path) -> str:
             )
     if cells is not None:
         synthetic = synthetic_cells(np.random.default_rng(6), len(FINE_SHARES), cells)
-        saved = np.load(parts)
-        distinct = [
-            len(
-                np.unique(
-                    np.concatenate([saved[f"{i}-{j}-cells"] for j in range(len(FINE_SHARES))])
-                )
-            )
-            for i in range(len(names))
-        ]
+        distinct = [d for _, d in named]
         lines += [
-            "Real parts: " + "; ".join(names) + ".",
-            f"Distinct cells over the 13 shares: synthetic query "
+            "Real parts: " + "; ".join(name for name, _ in named) + ".",
+            "Distinct cells over the 13 shares: synthetic query "
             f"{len(np.unique(np.concatenate([c[f > 0] for c, f in synthetic])))}; real parts "
-            "median "
-            f"{statistics.median(distinct):.0f} ({min(distinct)} to {max(distinct)}).",
+            f"median {statistics.median(distinct):.0f} ({min(distinct)} to {max(distinct)}).",
         ]
     return "\n".join(lines)
 
 
-def real_parts(real: str, path: Path, count: int = 5) -> list[str]:
+def real_parts(real: str, path: Path, count: int = 5) -> list[tuple[str, int]]:
     """Parts of ``count`` meshes of the index ``real`` as the benchmark makes them, a cut and a
     body with holes of each (rows spread over the index, seeded by their row), measured with
-    its parameters; saved to ``path`` (`Part.cells`, share by share) for `_time_partial`.
-    Returns their names."""
+    its parameters; pickled to ``path`` for `_time_partial`. Returns each one's name and the
+    distinct cells of its histograms at all shares."""
     from cfsig.index import IndexReader
 
     with IndexReader(real) as reader:
         params, n = reader.params, len(reader)
         rows = np.linspace(0, n - 1, count).astype(int)
         entries = reader.entries(rows)
-    arrays, names = {}, []
+    parts, named = [], []
     for row, entry in zip(rows, entries, strict=True):
         mesh = read_mesh(entry.path)
         rng = np.random.default_rng(int(row))
         for kind, make in (("cut", cut), ("holes", holes)):
             part = measure_part(make(mesh, rng), params)
             assert part.cells is not None  # version 10
-            for j, (c, f) in enumerate(part.cells):
-                arrays[f"{len(names)}-{j}-cells"], arrays[f"{len(names)}-{j}-fractions"] = c, f
-            names.append(f"{entry.name} {kind}")
-    np.savez(path, **arrays)
-    return names
+            parts.append(part)
+            distinct = np.unique(np.concatenate([c for c, _ in part.cells]))
+            named.append((f"{entry.name} {kind}", len(distinct)))
+    path.write_bytes(pickle.dumps(parts))
+    return named
 
 
 def _time_partial(real: str, path: Path, kernel: str, parts: Path | None) -> dict:
     """`scale`'s query in a fresh process: the first, then three more; with ``kernel`` for the
     fine cells ("numba" or "NumPy"; "reading alone" scores every row 0), else as cfsig
-    chooses. Then three of each real part saved in ``parts`` (`real_parts`), if given."""
+    chooses. Then three of each real part pickled in ``parts`` (`real_parts`), if given."""
     from benchmarks.index_scale import K, in_child
 
     force = {
@@ -494,11 +486,9 @@ def once(part):
     return time.perf_counter() - t
 out = {{'first': once(part), 'times': [once(part) for _ in range(3)], 'real': []}}
 if {str(parts) if parts else ""!r}:
-    saved = np.load({str(parts)!r})
-    for i in range(len(saved.files) // (2 * len(FINE_SHARES))):
-        shares = [(saved[f"{{i}}-{{j}}-cells"], saved[f"{{i}}-{{j}}-fractions"])
-                  for j in range(len(FINE_SHARES))]
-        out['real'].append([once(Part(cells=tuple(shares))) for _ in range(3)])
+    import pickle
+    for real_part in pickle.loads(open({str(parts)!r}, 'rb').read()):
+        out['real'].append([once(real_part) for _ in range(3)])
 """
     return in_child(code)
 
