@@ -272,11 +272,26 @@ def test_damaged_or_missing_cells_are_named(tmp_path):
         IndexReader(index)
 
 
-@pytest.mark.parametrize("kernel", ["numpy", "numba"])
-def test_partial_search_reads_every_live_rows_cells(tmp_path, monkeypatch, kernel):
-    if kernel == "numba":
+@pytest.fixture(params=["numpy", "numba"])
+def kernel(request, monkeypatch):
+    """The fine cells scored by NumPy's kernel, or by numba's (skipped without numba)."""
+    if request.param == "numba":
         pytest.importorskip("numba", reason="numba's kernel is the extra cfsig[fast]")
-    monkeypatch.setattr("cfsig.cells.FAST_MIN_ROWS", 0 if kernel == "numba" else 1 << 62)
+    monkeypatch.setattr("cfsig.cells.FAST_MIN_ROWS", 0 if request.param == "numba" else 1 << 62)
+    return request.param
+
+
+def _search_finds_the_nearest(reader, cells):
+    """`partial_search` of a part of even fractions on ``cells`` at every share finds the whole
+    of the smallest `partial_distances`, at that distance."""
+    part = Part(cells=((cells, np.full(len(cells), 1 / len(cells))),) * len(FINE_SHARES))
+    expected = partial_distances(part, reader.signatures[:], V10, reader.cells())
+    hits, distance = partial_search(reader, part, 3)
+    assert hits[0].entry.name == reader.column("names")[np.argmin(expected)]
+    assert distance == pytest.approx(expected.min(), abs=1e-5)
+
+
+def test_partial_search_reads_every_live_rows_cells(tmp_path, kernel):
     index = tmp_path / "i"
     with IndexWriter(index, V10) as w:
         for commit in range(3):
@@ -294,19 +309,12 @@ def test_partial_search_reads_every_live_rows_cells(tmp_path, monkeypatch, kerne
         dead = (view.cells[0][view.dead[0]], view.cells[1][view.dead[0]])  # superseded
         for query_cells, query_fractions in [dead, *zip(stored[:4], fractions[:4], strict=True)]:
             own = query_cells[query_fractions > 0].astype(np.int64)
-            kept = np.sort(rng.choice(own, max(1, len(own) // 2), replace=False))
-            part = Part(cells=((kept, np.full(len(kept), 1 / len(kept))),) * len(FINE_SHARES))
-            expected = partial_distances(part, reader.signatures[:], V10, (stored, fractions))
-            hits, distance = partial_search(reader, part, 3)
-            assert hits[0].entry.name == reader.column("names")[np.argmin(expected)]
-            assert distance == pytest.approx(expected.min(), abs=1e-5)
+            _search_finds_the_nearest(
+                reader, np.sort(rng.choice(own, max(1, len(own) // 2), replace=False))
+            )
 
 
-@pytest.mark.parametrize("kernel", ["numpy", "numba"])
-def test_partial_search_reads_compressed_cells_through_h5py(tmp_path, monkeypatch, kernel):
-    if kernel == "numba":
-        pytest.importorskip("numba", reason="numba's kernel is the extra cfsig[fast]")
-    monkeypatch.setattr("cfsig.cells.FAST_MIN_ROWS", 0 if kernel == "numba" else 1 << 62)
+def test_partial_search_reads_compressed_cells_through_h5py(tmp_path, kernel):
     index = tmp_path / "i"
     with IndexWriter(index, V10) as w:
         for i in range(12):
@@ -321,12 +329,7 @@ def test_partial_search_reads_compressed_cells_through_h5py(tmp_path, monkeypatc
         assert all(b.offset is None for b in plan_blocks(reader.segments[0].cells[0], 4))
         stored, fractions = reader.cells()
         for row in (3, 7):
-            own = stored[row][fractions[row] > 0].astype(np.int64)[::2]
-            part = Part(cells=((own, np.full(len(own), 1 / len(own))),) * len(FINE_SHARES))
-            expected = partial_distances(part, reader.signatures[:], V10, (stored, fractions))
-            hits, distance = partial_search(reader, part, 3)
-            assert hits[0].entry.name == reader.column("names")[np.argmin(expected)]
-            assert distance == pytest.approx(expected.min(), abs=1e-5)
+            _search_finds_the_nearest(reader, stored[row][fractions[row] > 0].astype(np.int64)[::2])
 
 
 def test_partial_search_without_memory_maps_reads_the_blocks(tmp_path, monkeypatch):
@@ -334,18 +337,15 @@ def test_partial_search_without_memory_maps_reads_the_blocks(tmp_path, monkeypat
     with IndexWriter(index, V10) as w:
         for i in range(8):
             w.add(Entry(f"c/{i}.off", "c", f"/d/c/{i}.off"), _signature(i))
+
+    def refuse(*args, **kwargs):
+        raise OSError("this file system has no memory maps")
+
+    monkeypatch.setattr("cfsig.blocks.mmap.mmap", refuse)
     with IndexReader(index) as reader:
         stored, fractions = reader.cells()
-        own = stored[5][fractions[5] > 0].astype(np.int64)[::3]
-        part = Part(cells=((own, np.full(len(own), 1 / len(own))),) * len(FINE_SHARES))
-        mapped, _ = partial_search(reader, part, 3)
-
-        def refuse(*args, **kwargs):
-            raise OSError("this file system has no memory maps")
-
-        monkeypatch.setattr("cfsig.blocks.mmap.mmap", refuse)
-        read, _ = partial_search(reader, part, 3)
-        assert [h.entry.name for h in read] == [h.entry.name for h in mapped]
+        for row in (2, 5):
+            _search_finds_the_nearest(reader, stored[row][fractions[row] > 0].astype(np.int64)[::3])
 
 
 def test_cells_cut_short_after_opening_are_a_clear_error(tmp_path):
