@@ -141,16 +141,16 @@ def _list_held(typingctx, slot, cells, fractions, at, found, whole, count):
     their table rows in ``found``, their fractions in ``whole``; the new count."""
 
     def codegen(context, builder, signature, args):
-        slots, rows, shares, at, listed, wholes, count = (
+        slots, cells, fractions, at, listed, wholes, count = (
             _pointer(context, builder, t, a) if isinstance(t, types.Array) else a
             for t, a in zip(signature.args, args, strict=True)
         )
         held = ir.Constant(_INTS, ir.Undefined)
         for j in range(_LANES):
-            cell = builder.load(builder.gep(rows, [builder.add(at, at.type(j))]))
+            cell = builder.load(builder.gep(cells, [builder.add(at, at.type(j))]))
             k = builder.load(builder.gep(slots, [builder.zext(cell, _WIDE)]))
             held = builder.insert_element(held, k, _INT(j))
-        fraction = _load_vector(builder, shares, at)
+        fraction = _load_vector(builder, fractions, at)
         keep = builder.and_(
             builder.icmp_unsigned("!=", held, ir.Constant(_INTS, [0] * _LANES)),
             builder.fcmp_unordered("!=", fraction, ir.Constant(_FLOATS, [0.0] * _LANES)),
@@ -174,7 +174,7 @@ def _best_gain(typingctx, table, inverse, found, whole, count):
     listed cells (padded to a multiple of 4): ``min(f p, w) / f + 2 min(p, w)``."""
 
     def codegen(context, builder, signature, args):
-        rows, inverses, listed, wholes, count = (
+        table, inverses, listed, wholes, count = (
             _pointer(context, builder, t, a) if isinstance(t, types.Array) else a
             for t, a in zip(signature.args, args, strict=True)
         )
@@ -191,7 +191,7 @@ def _best_gain(typingctx, table, inverse, found, whole, count):
                 for q in (2 * half, 2 * half + 1):
                     at = builder.add(e, e.type(q))
                     k = builder.zext(builder.load(builder.gep(listed, [at])), _WIDE)
-                    p = _load_vector(builder, rows, builder.mul(k, _WIDE(_LANES)))
+                    p = _load_vector(builder, table, builder.mul(k, _WIDE(_LANES)))
                     w = _splat(builder, builder.load(builder.gep(wholes, [at])))
                     explained = _minimum(builder, p, builder.fmul(w, inverse))
                     common = builder.fmul(two, _minimum(builder, p, w), flags=_FUSE)
