@@ -1,15 +1,11 @@
 """The fine-cell kernel of numba (optional extra ``cfsig[fast]``); see `cfsig.cells`.
 
-Each row takes two steps, both written as LLVM vector code (`numba.extending.intrinsic`):
-numba's own loops checked, for every four cells, that the sums did not overlap the part's
-table, and listed the cells one slot at a time; this kernel takes half their time
-(docs/partial.md, "Version 10: vector code").
-
-- `_list_held`, 16 slots at a time: each cell's row of the part's table, then the slots the
-  part holds (a row other than 0, a fraction other than 0) stored one after another with
-  their fractions (a compress store).
-- `_best_gain`: the gains of the listed cells at all 16 lanes of shares, summed in registers
-  four cells a pass; their largest.
+One pass over each row's slots, written as LLVM vector code (`numba.extending.intrinsic`,
+docs/partial.md, "Version 10: vector code"): each slot's cell finds its row of the part's table
+(row 0, all zeros, for the cells the part lacks), and its gains at all 16 lanes of shares are
+summed in registers, four slots a pass. A group of 16 slots whose fractions are all 0 (a row's
+padding) gains nothing and is skipped. Listing the held slots first, as an earlier kernel did,
+cost more than scoring the slots a part lacks.
 """
 
 from __future__ import annotations
@@ -30,7 +26,6 @@ _INT = ir.IntType(32)
 _WIDE = ir.IntType(64)
 _FLOATS = ir.VectorType(_FLOAT, _LANES)
 _INTS = ir.VectorType(_INT, _LANES)
-_MASK = ir.VectorType(ir.IntType(1), _LANES)
 # A multiplication and an addition may fuse, but no sum is reordered: each waits on one addition
 # a pass of four cells, where a free reordering chained three.
 _FUSE = ("contract",)
@@ -66,11 +61,12 @@ def part_scorer(
     if len(shares) > _LANES:
         raise ValueError(f"{len(shares)} shares: numba's kernel takes at most {_LANES}")
     held = np.unique(np.concatenate([np.asarray(c, np.int64) for c, _ in part]))
-    slot = np.zeros(1 << 16, np.uint32)  # a cell's row of the table; 0 for the cells it lacks
-    slot[held] = np.arange(1, len(held) + 1)
+    # Where a cell's row of the table starts, in floats; 0 for the cells the part lacks.
+    offset = np.zeros(1 << 16, np.uint32)
+    offset[held] = np.arange(1, len(held) + 1) * _LANES
     table = _aligned_zeros((len(held) + 1) * _LANES).reshape(-1, _LANES)
     for j, (c, p) in enumerate(part):
-        table[slot[c], j] = p
+        table[offset[c] // _LANES, j] = p
     inverse = np.ones(_LANES, np.float32)  # a padding share's table is 0: it gains nothing
     inverse[: len(shares)] = 1 / np.asarray(shares)
     flat = table.ravel()
@@ -78,7 +74,7 @@ def part_scorer(
     def scorer(cells: np.ndarray, fractions: np.ndarray) -> np.ndarray:
         out = np.empty(len(cells))
         cells, fractions = np.ascontiguousarray(cells), np.ascontiguousarray(fractions)
-        _scores(slot, flat, inverse, cells.reshape(-1), fractions.reshape(-1), out)
+        _scores(offset, flat, inverse, cells.reshape(-1), fractions.reshape(-1), out)
         return out
 
     return scorer
@@ -92,25 +88,12 @@ def _aligned_zeros(count: int) -> np.ndarray:
 
 
 @numba.njit(nogil=True, boundscheck=False, cache=True)
-def _scores(slot, table, inverse, cells, fractions, out):
+def _scores(offset, table, inverse, cells, fractions, out):
     """``out[i]``: row i's partial distance; ``cells`` and ``fractions`` hold the rows one after
-    another. The slots past the last whole vector of 16 are listed one by one."""
+    another."""
     width = len(cells) // max(len(out), 1)
-    found = np.zeros(width + 4, np.uint32)  # the listed cells' rows of the table, then 0s
-    whole = np.zeros(width + 4, np.float32)
-    vectors = width - width % _LANES
     for i in range(len(out)):
-        start = i * width
-        count = 0
-        for s in range(start, start + vectors, _LANES):
-            count = _list_held(slot, cells, fractions, s, found, whole, count)
-        for s in range(start + vectors, start + width):
-            k = slot[cells[s]]
-            found[count], whole[count] = k, fractions[s]
-            count += (k != 0) & (fractions[s] != 0)
-        found[count : count + 4] = 0  # padding: the table's row 0 gains nothing
-        whole[count : count + 4] = 0
-        out[i] = 3.0 - _best_gain(table, inverse, found, whole, count)
+        out[i] = 3.0 - _row_gain(offset, table, inverse, cells, fractions, i * width, width)
 
 
 def _pointer(context, builder, array_type, array):
@@ -136,68 +119,48 @@ def _minimum(builder, a, b):
 
 
 @intrinsic
-def _list_held(typingctx, slot, cells, fractions, at, found, whole, count):
-    """List the slots ``at`` to ``at + 16`` that the part holds after the ``count`` listed:
-    their table rows in ``found``, their fractions in ``whole``; the new count."""
+def _row_gain(typingctx, offset, table, inverse, cells, fractions, start, width):
+    """The largest over the shares of ``3 - score`` of the row of ``width`` slots from
+    ``start``, summed slot by slot: ``min(f p, w) / f + 2 min(p, w)``. Groups of 16 slots, then
+    the last ``width % 16`` one by one."""
 
     def codegen(context, builder, signature, args):
-        slots, cells, fractions, at, listed, wholes, count = (
-            _pointer(context, builder, t, a) if isinstance(t, types.Array) else a
-            for t, a in zip(signature.args, args, strict=True)
-        )
-        held = ir.Constant(_INTS, ir.Undefined)
-        for j in range(_LANES):
-            cell = builder.load(builder.gep(cells, [builder.add(at, at.type(j))]))
-            k = builder.load(builder.gep(slots, [builder.zext(cell, _WIDE)]))
-            held = builder.insert_element(held, k, _INT(j))
-        fraction = _load_vector(builder, fractions, at)
-        keep = builder.and_(
-            builder.icmp_unsigned("!=", held, ir.Constant(_INTS, [0] * _LANES)),
-            builder.fcmp_unordered("!=", fraction, ir.Constant(_FLOATS, [0.0] * _LANES)),
-        )
-        for values, into, kind in ((held, listed, "i32"), (fraction, wholes, "f32")):
-            store = cgutils.get_or_insert_function(
-                builder.module,
-                ir.FunctionType(ir.VoidType(), [values.type, into.type, _MASK]),
-                f"llvm.masked.compressstore.v{_LANES}{kind}",
-            )
-            builder.call(store, [values, builder.gep(into, [count]), keep])
-        kept = builder.ctpop(builder.bitcast(keep, ir.IntType(_LANES)))
-        return builder.add(count, builder.zext(kept, _WIDE))
-
-    return types.int64(slot, cells, fractions, at, found, whole, count), codegen
-
-
-@intrinsic
-def _best_gain(typingctx, table, inverse, found, whole, count):
-    """The largest over the shares of ``3 - score``, summed cell by cell over the ``count``
-    listed cells (padded to a multiple of 4): ``min(f p, w) / f + 2 min(p, w)``."""
-
-    def codegen(context, builder, signature, args):
-        table, inverses, listed, wholes, count = (
+        offsets, table, inverses, cells, fractions, start, width = (
             _pointer(context, builder, t, a) if isinstance(t, types.Array) else a
             for t, a in zip(signature.args, args, strict=True)
         )
         inverse = _load_vector(builder, inverses, _WIDE(0))
         two = ir.Constant(_FLOATS, [2.0] * _LANES)
-        # Two sums, each of two cells a pass: LLVM keeps them in registers.
-        sums = [
-            cgutils.alloca_once_value(builder, ir.Constant(_FLOATS, [0.0] * _LANES))
-            for _ in range(2)
-        ]
-        with cgutils.for_range_slice(builder, count.type(0), count, count.type(4)) as (e, _):
-            for half, total in enumerate(sums):
-                gains = []
-                for q in (2 * half, 2 * half + 1):
-                    at = builder.add(e, e.type(q))
-                    k = builder.zext(builder.load(builder.gep(listed, [at])), _WIDE)
-                    p = _load_vector(builder, table, builder.mul(k, _WIDE(_LANES)))
-                    w = _splat(builder, builder.load(builder.gep(wholes, [at])))
-                    explained = _minimum(builder, p, builder.fmul(w, inverse))
-                    common = builder.fmul(two, _minimum(builder, p, w), flags=_FUSE)
-                    gains.append(builder.fadd(explained, common, flags=_FUSE))
-                pair = builder.fadd(gains[0], gains[1])
-                builder.store(builder.fadd(builder.load(total), pair), total)
+        nothing = ir.Constant(_FLOATS, [0.0] * _LANES)
+        # Two sums, each of two slots a pass of four: LLVM keeps them in registers.
+        sums = [cgutils.alloca_once_value(builder, nothing) for _ in range(2)]
+
+        def gain(at):
+            cell = builder.zext(builder.load(builder.gep(cells, [at])), _WIDE)
+            row = builder.zext(builder.load(builder.gep(offsets, [cell])), _WIDE)
+            p = _load_vector(builder, table, row)
+            w = _splat(builder, builder.load(builder.gep(fractions, [at])))
+            explained = _minimum(builder, p, builder.fmul(w, inverse))
+            common = builder.fmul(two, _minimum(builder, p, w), flags=_FUSE)
+            return builder.fadd(explained, common, flags=_FUSE)
+
+        def add(total, value):
+            builder.store(builder.fadd(builder.load(total), value), total)
+
+        stop = builder.add(start, width)
+        groups = builder.sub(stop, builder.srem(width, width.type(_LANES)))
+        with cgutils.for_range_slice(builder, start, groups, start.type(_LANES)) as (g, _):
+            held = builder.fcmp_unordered("!=", _load_vector(builder, fractions, g), nothing)
+            any_held = builder.icmp_unsigned(
+                "!=", builder.bitcast(held, ir.IntType(_LANES)), ir.IntType(_LANES)(0)
+            )
+            with builder.if_then(any_held, likely=True):
+                for e in range(0, _LANES, 4):
+                    for half, total in enumerate(sums):
+                        at = builder.add(g, g.type(e + 2 * half))
+                        add(total, builder.fadd(gain(at), gain(builder.add(at, at.type(1)))))
+        with cgutils.for_range_slice(builder, groups, stop, start.type(1)) as (e, _):
+            add(sums[0], gain(e))
         gained = builder.fadd(builder.load(sums[0]), builder.load(sums[1]))
         best = builder.extract_element(gained, _INT(0))
         for j in range(1, _LANES):
@@ -205,4 +168,4 @@ def _best_gain(typingctx, table, inverse, found, whole, count):
             best = builder.select(builder.fcmp_ordered(">", lane, best), lane, best)
         return best
 
-    return types.float32(table, inverse, found, whole, count), codegen
+    return types.float32(offset, table, inverse, cells, fractions, start, width), codegen

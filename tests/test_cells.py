@@ -106,7 +106,7 @@ def test_cell_scores_are_the_partial_distance():
     assert same[0] == pytest.approx(0.0, abs=1e-6)  # a whole is its own part at share 1
 
 
-@pytest.mark.parametrize("slots", [400, 407])  # whole vectors of 16 slots, and 7 left over
+@pytest.mark.parametrize("slots", [400, 407])  # whole groups of 16 slots, and 7 left over
 def test_compiled_scores_are_numpys(slots):
     pytest.importorskip("numba", reason="numba's kernel is the extra cfsig[fast]")
     rng = np.random.default_rng(5)
@@ -126,6 +126,8 @@ def test_compiled_scores_are_numpys(slots):
             c, w = part[row % len(shares)]
         w = w.copy()
         w[rng.random(len(w)) < 0.05] = 0  # occupied slots of no area, among the others
+        if row % 7 == 1:  # 32 slots of no area, between held ones: a group skipped, not the end
+            w[16:48] = 0
         cells[row, : len(c)], fractions[row, : len(c)] = c, w
     fast = part_scorer(part, shares, FAST_MIN_ROWS)
     assert not isinstance(fast, functools.partial)  # numba's, not cell_scores
