@@ -147,10 +147,16 @@ def _row_gain(typingctx, offset, table, inverse, cells, fractions, start, width)
         def add(total, value):
             builder.store(builder.fadd(builder.load(total), value), total)
 
+        # An empty asm statement hides that the test of a group reads the fractions that its
+        # slots then read one by one: else LLVM takes each slot's fraction from the test's
+        # vector by a shuffle, on a port the arithmetic needs, rather than by a load.
+        hidden = builder.asm(
+            ir.FunctionType(fractions.type, [fractions.type]), "", "=r,0", [fractions], False
+        )
         stop = builder.add(start, width)
         groups = builder.sub(stop, builder.srem(width, width.type(_LANES)))
         with cgutils.for_range_slice(builder, start, groups, start.type(_LANES)) as (g, _):
-            held = builder.fcmp_unordered("!=", _load_vector(builder, fractions, g), nothing)
+            held = builder.fcmp_unordered("!=", _load_vector(builder, hidden, g), nothing)
             any_held = builder.icmp_unsigned(
                 "!=", builder.bitcast(held, ir.IntType(_LANES)), ir.IntType(_LANES)(0)
             )
