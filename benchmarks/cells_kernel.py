@@ -1,0 +1,122 @@
+"""Numba's fine-cell kernel of this checkout against that of an earlier commit (docs/partial.md).
+
+    python benchmarks/cells_kernel.py --against REV --real INDEX --dir DIR
+
+The host's speed drifts by a tenth or more between runs, so a change to `cfsig.cells_numba` is
+judged here by a ratio in one process: ``cfsig/cells_numba.py`` as it was at commit REV (read
+with ``git show``) and as it is now, loaded side by side, take turns at the same
+``cfsig query --partial`` searches (`cfsig.parts.partial_search`), round after round, over the
+synthetic index of ``benchmarks/partial.py --scale`` in DIR (``partial-fine-ROWS``, built from
+INDEX, an index of SHREC 2007 of version 10: run that first). The queries are those of
+``partial.py --scale``: the synthetic query, then its real parts (`partial.real_parts`). Each
+kernel's first search of each query compiles or loads its code and is not counted; reported,
+the median over the rounds and the median over the real parts of theirs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import os
+import pickle
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+
+def load_kernel(rev: str | None, folder: Path):
+    """``cfsig.cells_numba`` at commit ``rev`` (None: this checkout's), as a module of its own;
+    numba caches its compiled code in ``folder``."""
+    if rev is None:
+        source = (ROOT / "cfsig" / "cells_numba.py").read_text()
+    else:
+        show = ["git", "-C", str(ROOT), "show", f"{rev}:cfsig/cells_numba.py"]
+        source = subprocess.run(show, capture_output=True, text=True, check=True).stdout
+    name = f"cells_numba_{rev or 'now'}".replace("-", "_").replace("~", "_").replace("^", "_")
+    path = folder / f"{name}.py"
+    path.write_text(source)
+    spec = importlib.util.spec_from_file_location(name, path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--against", required=True, help="a commit: its cells_numba.py")
+    parser.add_argument("--real", required=True, help="the index of SHREC 2007, version 10")
+    parser.add_argument("--dir", type=Path, required=True, help="partial.py --scale's folder")
+    parser.add_argument("--rows", type=int, default=1_000_000)
+    parser.add_argument("--rounds", type=int, default=5)
+    args = parser.parse_args()
+
+    import cfsig.cells_numba
+    from benchmarks.index_scale import synthetic_cells
+    from benchmarks.partial import real_parts
+    from cfsig.index import IndexReader
+    from cfsig.parts import FINE_SHARES, Part, partial_search
+
+    index = args.dir / f"partial-fine-{args.rows}"
+    if not (index / "manifest.h5").exists():
+        sys.exit(f"{index}: no synthetic index; build it with benchmarks/partial.py --scale")
+    with IndexReader(args.real) as reader:
+        cells = reader.cells()
+    if cells is None:
+        sys.exit(f"{args.real}: not an index of version 10")
+    held = synthetic_cells(np.random.default_rng(6), len(FINE_SHARES), cells)
+    synthetic = Part(cells=tuple((c[f > 0].astype(np.int64), f[f > 0] / f.sum()) for c, f in held))
+    with tempfile.TemporaryDirectory() as scratch:
+        parts_file = Path(scratch) / "parts.pickle"
+        real_parts(args.real, parts_file)
+        queries = [
+            ("synthetic query", synthetic),
+            *enumerate(pickle.loads(parts_file.read_bytes())),
+        ]
+        kernels = {
+            f"at {args.against}": load_kernel(args.against, Path(scratch)),
+            "now": load_kernel(None, Path(scratch)),
+        }
+        times = {(k, i): [] for k in kernels for i, _ in enumerate(queries)}
+
+        def search(kernel, part) -> float:
+            cfsig.cells_numba.part_scorer = kernel.part_scorer
+            start = time.perf_counter()
+            with IndexReader(index) as reader:
+                partial_search(reader, part, 20)
+            return time.perf_counter() - start
+
+        for round_ in range(args.rounds + 1):
+            for i, (_, part) in enumerate(queries):
+                for name, kernel in kernels.items():
+                    took = search(kernel, part)
+                    if round_:
+                        times[(name, i)].append(took)
+    print(f"{args.rows:,} rows, {args.rounds} rounds, load average {os.getloadavg()[0]:.1f}:")
+    for name in kernels:
+        synthetic_time = statistics.median(times[(name, 0)])
+        real = [statistics.median(times[(name, i)]) for i in range(1, len(queries))]
+        print(
+            f"- kernel {name}: synthetic query {synthetic_time:.3f} s; real parts "
+            f"{statistics.median(real):.3f} s ({min(real):.3f} to {max(real):.3f})"
+        )
+    before, now = kernels
+    for label, picked in (("synthetic query", [0]), ("real parts", range(1, len(queries)))):
+        ratios = [
+            statistics.median(times[(now, i)]) / statistics.median(times[(before, i)])
+            for i in picked
+        ]
+        print(f"- now / {before}, {label}: {statistics.median(ratios):.3f}")
+
+
+if __name__ == "__main__":
+    main()
