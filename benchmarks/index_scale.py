@@ -76,22 +76,27 @@ def real_rows(index: str | None, params: Params = PARAMS) -> np.ndarray | None:
 
 
 def synthetic_cells(
-    rng: np.random.Generator, n: int, real: tuple[np.ndarray, np.ndarray]
+    rng: np.random.Generator, n: int, real: tuple[np.ndarray, np.ndarray], fill: str = "full"
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """n rows of fine cells (`cfsig.cells.packed_cells`) from the cells ``real`` of the rows of a
     real index (`IndexReader.cells`): two real rows' cells, their fractions mixed as
-    `synthetic_rows` mixes vectors, the largest that fit kept."""
+    `synthetic_rows` mixes vectors, the largest kept: as many as fit (``fill="full"``: the two
+    rows together nearly always fill every slot), or as many as a third real row, drawn at
+    random, occupies (``fill="real"``: rows fill their slots as the real index's do)."""
     cells, fractions = real
     slots = cells.shape[1]
     i, j = rng.integers(0, len(cells), (2, n))
     t = rng.random(n)
+    counts = np.full(n, slots)
+    if fill == "real":
+        counts = (fractions > 0).sum(axis=1)[rng.integers(0, len(cells), n)]
     out = []
-    for a, b, share in zip(i, j, t, strict=True):
+    for a, b, share, count in zip(i, j, t, counts, strict=True):
         both = np.concatenate([cells[a], cells[b]])
         mixed = np.concatenate([share * fractions[a], (1 - share) * fractions[b]])
         held, where = np.unique(both, return_inverse=True)
         summed = np.bincount(where, weights=mixed)
-        keep = np.sort(np.argsort(-summed, kind="stable")[:slots])
+        keep = np.sort(np.argsort(-summed, kind="stable")[:count])
         keep = keep[summed[keep] > 0]
         row_cells, row_fractions = np.zeros(slots, np.uint16), np.zeros(slots, np.float32)
         row_cells[: len(keep)], row_fractions[: len(keep)] = held[keep], summed[keep]
@@ -133,10 +138,12 @@ def build(
     real: np.ndarray | None,
     params: Params = PARAMS,
     cells: tuple[np.ndarray, np.ndarray] | None = None,
+    fill: str = "full",
 ) -> float:
     """Write n synthetic rows of ``params`` in commits of BUILD_ROWS, with `synthetic_cells` of
-    the real ``cells`` when the parameters keep fine cells, in commits of PIECE_ROWS then (a
-    commit holds its rows in memory: 6 KB of cells a row); return the seconds taken."""
+    the real ``cells`` (and ``fill``) when the parameters keep fine cells, in commits of
+    PIECE_ROWS then (a commit holds its rows in memory: 6 KB of cells a row); return the
+    seconds taken."""
     from cfsig.signature import Signature
 
     rng = np.random.default_rng(0)
@@ -145,7 +152,8 @@ def build(
     with IndexWriter(path, params, merge=False) as writer:
         for first in range(0, n, PIECE_ROWS):
             rows = synthetic_rows(rng, min(PIECE_ROWS, n - first), real)
-            fine = [None] * len(rows) if cells is None else synthetic_cells(rng, len(rows), cells)
+            count = len(rows)
+            fine = [None] * count if cells is None else synthetic_cells(rng, count, cells, fill)
             for i, (vector, held) in enumerate(zip(rows, fine, strict=True), first):
                 sig = Signature(vector, phi, 1, 1, 1, 0.0, (), "clean", 0.0, "", held)
                 writer.add(entry(i), sig)

@@ -3,7 +3,8 @@
     python benchmarks/partial.py --data-root /work/data --doc docs/partial.md
     python benchmarks/partial.py --scale 1000000 --real INDEX --dir DIR   # one query's time
 
-(``--scale`` builds synthetic rows of the version of INDEX, an index of SHREC 2007: 9 or 10.)
+(``--scale`` builds synthetic rows of the version of INDEX, an index of SHREC 2007: 9 or 10;
+for 10, ``--fill real`` fills each row's cells as the real index's rows do, not every slot.)
 
 For every mesh of each collection (``--data-root``, where ``../shared/data/unpack`` puts them)
 the script makes two parts, seeded by the mesh's position so that every run makes the same:
@@ -369,15 +370,17 @@ def _genus_table(data: dict) -> list[str]:
     return [*lines, "", *per_class, "", outliers]
 
 
-def scale(rows: int, real: str, folder: Path) -> str:
+def scale(rows: int, real: str, folder: Path, fill: str = "full") -> str:
     """Seconds of one partial query over ``rows`` synthetic rows, in a fresh process.
 
     The rows are `benchmarks/index_scale.py`'s mixed ones (two real signatures of the index
     ``real`` blended, plus noise), written by its ``build``, of the real index's version. For
     version 9 the query's vectors for the seven shares are the curvature columns of seven more
     such rows; for version 10, whose rows also get fine cells mixed from two real rows'
-    (`index_scale.synthetic_cells`), the query's cells at the 13 shares are 13 more such rows'
-    (the synthetic query), and then the real parts of `real_parts`. Open,
+    (`index_scale.synthetic_cells`: with ``fill="full"`` nearly every row fills all its slots,
+    with ``"real"`` as many as the real index's rows do), the query's cells at the 13 shares are
+    13 more such rows' with every slot filled (the synthetic query), and then the real parts of
+    `real_parts`. Open,
     `cfsig.parts.partial_search` for 20 results and their names: the first query of the
     process (imports and compiled code loaded), then three more of each query. For version 10
     three times, in three processes, whatever `cfsig.cells.part_scorer` would choose for so
@@ -392,13 +395,16 @@ def scale(rows: int, real: str, folder: Path) -> str:
     with IndexReader(real) as reader:
         params, cells = reader.params, reader.cells()
     # Not index_scale.py's name for the same rows: its commit timings add rows to what it reuses.
-    path = folder / (f"partial-mixed-{rows}" if cells is None else f"partial-fine-{rows}")
+    kind = "mixed" if cells is None else {"full": "fine", "real": "fine-real-fill"}[fill]
+    path = folder / f"partial-{kind}-{rows}"
     built = None
     if not (path / "manifest.h5").exists():
-        built = build(path, rows, real_rows(real, params), params, cells)
+        built = build(path, rows, real_rows(real, params), params, cells, fill)
     how = "reused" if built is None else f"built in {built:.0f} s"
     lines = [
-        f"One partial query over {rows:,} rows of version {params.version} ({how}; its files "
+        f"One partial query over {rows:,} rows of version {params.version}"
+        + ("" if cells is None else f", cells filled {fill}")
+        + f" ({how}; its files "
         f"dropped from the page cache and read back in order in {_read_back(path):.0f} s):"
     ]
     parts = folder / "partial-real-parts.pickle"
@@ -524,11 +530,17 @@ def main() -> None:
     parser.add_argument("--scale", type=int, help="time one partial query over this many rows")
     parser.add_argument("--real", help="--scale: an index of real cfhks signatures")
     parser.add_argument("--dir", type=Path, help="--scale: folder of the synthetic index")
+    parser.add_argument(
+        "--fill",
+        choices=["full", "real"],
+        default="full",
+        help="--scale, version 10: rows' cells fill every slot, or as many as real rows do",
+    )
     args = parser.parse_args()
     if args.scale:
         if not (args.real and args.dir):
             parser.error("--scale needs --real INDEX and --dir DIR")
-        print(scale(args.scale, args.real, args.dir))
+        print(scale(args.scale, args.real, args.dir, args.fill))
         return
     results = {}
     for name in COLLECTIONS:
