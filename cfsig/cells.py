@@ -22,7 +22,7 @@ import numpy as np
 CURVATURE_RANGE = 6.0  # bins span asinh(value / CURVATURE_UNIT) in [-6, 6]: +-2000 in value
 CURVATURE_UNIT = 10.0  # about the sphere's 4 pi: the histogram is linear below, logarithmic above
 SLOTS = 1024  # cells kept per whole: 709 a whole is the median on SHREC 2007, 1,070 the most
-# Rows from which numba's kernel repays its import and loading its compiled code (about 0.25 s)
+# Rows from which numba's kernel repays its import and loading its compiled code (about 0.4 s)
 # in a process's first query: docs/partial.md, "Scale", "Version 10: vector code".
 FAST_MIN_ROWS = 2_000
 # A whole's `packed_cells`: (SLOTS,) uint16 cells and (SLOTS,) float32 fractions.
@@ -204,7 +204,7 @@ def part_scorer(
         As `cell_scores`.
     rows : int
         Rows the search will score: from `FAST_MIN_ROWS`, numba's kernel if it loads
-        (`cfsig.cells_numba.part_scorer`, 10 to 74 times as fast), else `cell_scores`.
+        (`cfsig.cells_numba.part_scorer`, 10 to 80 times as fast), else `cell_scores`.
 
     Returns
     -------
