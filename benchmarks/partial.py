@@ -370,7 +370,7 @@ def _genus_table(data: dict) -> list[str]:
     return [*lines, "", *per_class, "", outliers]
 
 
-def scale(rows: int, real: str, folder: Path, fill: str = "full") -> str:
+def scale(rows: int, real: str, folder: Path, fill: str = "full", processes: int = 1) -> str:
     """Seconds of one partial query over ``rows`` synthetic rows, in a fresh process.
 
     The rows are `benchmarks/index_scale.py`'s mixed ones (two real signatures of the index
@@ -382,10 +382,11 @@ def scale(rows: int, real: str, folder: Path, fill: str = "full") -> str:
     13 more such rows' with every slot filled (the synthetic query), and then the real parts of
     `real_parts`. Open,
     `cfsig.parts.partial_search` for 20 results and their names: the first query of the
-    process (imports and compiled code loaded), then three more of each query. For version 10
-    three times, in three processes, whatever `cfsig.cells.part_scorer` would choose for so
-    many rows: with numba's kernel; with NumPy's (the synthetic query alone); and scoring
-    nothing, what reading the cells costs.
+    process (imports and compiled code loaded), then three more of each query. For version 10,
+    each in processes of its own, whatever `cfsig.cells.part_scorer` would choose for so many
+    rows: with numba's kernel (in ``processes`` processes one after another: the first after
+    the files are read back meets pages read only once); with NumPy's (the synthetic query
+    alone); and scoring nothing, what reading the cells costs.
     """
     sys.path.insert(0, str(ROOT))
     from benchmarks.index_scale import build, real_rows, synthetic_cells
@@ -410,8 +411,11 @@ def scale(rows: int, real: str, folder: Path, fill: str = "full") -> str:
     parts = folder / "partial-real-parts.pickle"
     if cells is not None:
         named = real_parts(real, parts)
-    for kernel in ("numba", "NumPy", "reading alone") if cells is not None else ("",):
+    kernels = ["numba"] * processes + ["NumPy", "reading alone"] if cells is not None else [""]
+    for n, kernel in enumerate(kernels):
         out = _time_partial(real, path, kernel, parts if kernel != "NumPy" else None)
+        if kernel == "numba" and processes > 1:
+            kernel = f"numba, process {n + 1}"
         lines.append(
             f"- {kernel or 'query'}, synthetic query: **{statistics.median(out['times']):.3f} "
             "s** (median of 3; "
@@ -539,11 +543,14 @@ def main() -> None:
         default="full",
         help="--scale, version 10: rows' cells fill every slot, or as many as real rows do",
     )
+    parser.add_argument(
+        "--processes", type=int, default=1, help="--scale, version 10: numba's query timed in N"
+    )
     args = parser.parse_args()
     if args.scale:
         if not (args.real and args.dir):
             parser.error("--scale needs --real INDEX and --dir DIR")
-        print(scale(args.scale, args.real, args.dir, args.fill))
+        print(scale(args.scale, args.real, args.dir, args.fill, args.processes))
         return
     results = {}
     for name in COLLECTIONS:
