@@ -26,8 +26,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -41,7 +39,7 @@ def load_kernel(rev: str | None, folder: Path):
     else:
         show = ["git", "-C", str(ROOT), "show", f"{rev}:cfsig/cells_numba.py"]
         source = subprocess.run(show, capture_output=True, text=True, check=True).stdout
-    name = f"cells_numba_{rev or 'now'}".replace("-", "_").replace("~", "_").replace("^", "_")
+    name = "cells_numba_before" if rev else "cells_numba_now"
     path = folder / f"{name}.py"
     path.write_text(source)
     spec = importlib.util.spec_from_file_location(name, path)
@@ -61,10 +59,10 @@ def main() -> None:
     args = parser.parse_args()
 
     import cfsig.cells_numba
-    from benchmarks.index_scale import synthetic_cells
+    from benchmarks.index_scale import synthetic_query
     from benchmarks.partial import real_parts
     from cfsig.index import IndexReader
-    from cfsig.parts import FINE_SHARES, Part, partial_search
+    from cfsig.parts import Part, partial_search
 
     index = args.dir / f"partial-fine-{args.rows}"
     if not (index / "manifest.h5").exists():
@@ -73,8 +71,7 @@ def main() -> None:
         cells = reader.cells()
     if cells is None:
         sys.exit(f"{args.real}: not an index of version 10")
-    held = synthetic_cells(np.random.default_rng(6), len(FINE_SHARES), cells)
-    synthetic = Part(cells=tuple((c[f > 0].astype(np.int64), f[f > 0] / f.sum()) for c, f in held))
+    synthetic = Part(cells=synthetic_query(cells))
     with tempfile.TemporaryDirectory() as scratch:
         parts_file = Path(scratch) / "parts.pickle"
         real_parts(args.real, parts_file)

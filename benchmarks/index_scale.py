@@ -104,6 +104,18 @@ def synthetic_cells(
     return out
 
 
+def synthetic_query(
+    real: tuple[np.ndarray, np.ndarray],
+) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+    """The synthetic partial query of version 10: its cells at each of the 13 shares
+    (`cfsig.parts.FINE_SHARES`) are those of one more `synthetic_cells` row, seeded: 13
+    unrelated histograms, each of mass 1."""
+    from cfsig.parts import FINE_SHARES
+
+    held = synthetic_cells(np.random.default_rng(6), len(FINE_SHARES), real)
+    return tuple((c[f > 0].astype(np.int64), f[f > 0] / f.sum()) for c, f in held)
+
+
 def synthetic_rows(rng: np.random.Generator, n: int, real: np.ndarray | None) -> np.ndarray:
     """n rows: mixtures of two real rows plus noise, or uniform random values without ``real``."""
     if real is None:

@@ -389,9 +389,8 @@ def scale(rows: int, real: str, folder: Path, fill: str = "full", processes: int
     alone); and scoring nothing, what reading the cells costs.
     """
     sys.path.insert(0, str(ROOT))
-    from benchmarks.index_scale import build, real_rows, synthetic_cells
+    from benchmarks.index_scale import build, real_rows, synthetic_query
     from cfsig.index import IndexReader
-    from cfsig.parts import FINE_SHARES
 
     with IndexReader(real) as reader:
         params, cells = reader.params, reader.cells()
@@ -430,12 +429,12 @@ def scale(rows: int, real: str, folder: Path, fill: str = "full", processes: int
                 f"{len(each)} parts' medians of 3; {min(each):.3f} to {max(each):.3f})."
             )
     if cells is not None:
-        synthetic = synthetic_cells(np.random.default_rng(6), len(FINE_SHARES), cells)
+        synthetic = synthetic_query(cells)
         distinct = [d for _, d in named]
         lines += [
             "Real parts: " + "; ".join(name for name, _ in named) + ".",
             "Distinct cells over the 13 shares: synthetic query "
-            f"{len(np.unique(np.concatenate([c[f > 0] for c, f in synthetic])))}; real parts "
+            f"{len(np.unique(np.concatenate([c for c, _ in synthetic])))}; real parts "
             f"median {statistics.median(distinct):.0f} ({min(distinct)} to {max(distinct)}).",
         ]
     return "\n".join(lines)
@@ -501,18 +500,16 @@ def _time_partial(real: str, path: Path, kernel: str, parts: Path | None) -> dic
 import numpy as np
 import cfsig.cells, cfsig.parts
 from cfsig.index import IndexReader
-from cfsig.parts import FINE_SHARES, SHARES, Part, curvature_columns, partial_search
-from benchmarks.index_scale import real_rows, synthetic_cells, synthetic_rows
+from cfsig.parts import SHARES, Part, curvature_columns, partial_search
+from benchmarks.index_scale import real_rows, synthetic_query, synthetic_rows
 {force}
 with IndexReader({real!r}) as reader:
     params, cells = reader.params, reader.cells()
-rng = np.random.default_rng(6)
 if cells is None:
-    rows = synthetic_rows(rng, len(SHARES), real_rows({real!r}, params))
+    rows = synthetic_rows(np.random.default_rng(6), len(SHARES), real_rows({real!r}, params))
     part = Part(vectors=rows[:, curvature_columns(params)])
 else:
-    held = synthetic_cells(rng, len(FINE_SHARES), cells)
-    part = Part(cells=tuple((c[f > 0].astype(np.int64), f[f > 0] / f.sum()) for c, f in held))
+    part = Part(cells=synthetic_query(cells))
 def once(part):
     t = time.perf_counter()
     with IndexReader({str(path)!r}) as r:
