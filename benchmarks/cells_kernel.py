@@ -58,6 +58,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     args = parser.parse_args()
 
+    import cfsig.cells
     import cfsig.cells_numba
     from benchmarks.index_scale import synthetic_query
     from benchmarks.partial import real_parts
@@ -84,6 +85,8 @@ def main() -> None:
             "now": load_kernel(None, Path(scratch)),
         }
         times = {(k, i): [] for k in kernels for i, _ in enumerate(queries)}
+
+        cfsig.cells.FAST_MIN_ROWS = 0  # numba's kernel at any size
 
         def search(kernel, part) -> float:
             cfsig.cells_numba.part_scorer = kernel.part_scorer
