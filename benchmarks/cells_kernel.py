@@ -11,6 +11,14 @@ INDEX, an index of SHREC 2007 of version 10: run that first). The queries are th
 ``partial.py --scale``: the synthetic query, then its real parts (`partial.real_parts`). Each
 kernel's first search of each query compiles or loads its code and is not counted; reported,
 the median over the rounds and the median over the real parts of theirs.
+
+    python benchmarks/cells_kernel.py --bounds --real INDEX --dir DIR
+
+What bounds this checkout's kernel: its time per slot, one thread per core each on rows of its
+own, on rows that stay in the cache (150 synthetic rows per thread, scored over and over) for
+the synthetic query, for the first real part, and for a part that holds none of the rows' cells
+(every slot finds the table's row 0: the arithmetic alone); then inside the kernel during the
+synthetic query's search of the 1M rows, read from the page cache. The median of five rounds.
 """
 
 from __future__ import annotations
@@ -23,6 +31,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -51,7 +60,8 @@ def load_kernel(rev: str | None, folder: Path):
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--against", required=True, help="a commit: its cells_numba.py")
+    parser.add_argument("--against", help="a commit: its cells_numba.py")
+    parser.add_argument("--bounds", action="store_true", help="time per slot, in and out of cache")
     parser.add_argument("--real", required=True, help="the index of SHREC 2007, version 10")
     parser.add_argument("--dir", type=Path, required=True, help="partial.py --scale's folder")
     parser.add_argument("--rows", type=int, default=1_000_000)
@@ -80,6 +90,11 @@ def main() -> None:
             ("synthetic query", synthetic),
             *enumerate(pickle.loads(parts_file.read_bytes())),
         ]
+        if args.bounds:
+            bounds(cells, [part for _, part in queries[:2]], index, args.rounds)
+            return
+        if args.against is None:
+            parser.error("--against REV, or --bounds")
         kernels = {
             f"at {args.against}": load_kernel(args.against, Path(scratch)),
             "now": load_kernel(None, Path(scratch)),
@@ -116,6 +131,87 @@ def main() -> None:
             for i in picked
         ]
         print(f"- now / {before}, {label}: {statistics.median(ratios):.3f}")
+
+
+def bounds(real, queries, index: Path, rounds: int) -> None:
+    """Print the kernel's time per slot in the cache and from ``index`` (module docstring);
+    ``queries``: the synthetic query and a real part."""
+    import numpy as np
+
+    from benchmarks.index_scale import synthetic_cells
+    from cfsig.parts import FINE_SHARES
+
+    threads, rows = len(os.sched_getaffinity(0)), 150
+    held = synthetic_cells(np.random.default_rng(1), threads * rows, real)
+    stacked = np.stack([c for c, _ in held]), np.stack([f for _, f in held])
+    blocks = [tuple(a[t * rows : (t + 1) * rows] for a in stacked) for t in range(threads)]
+    nothing = tuple((np.array([65_535]), np.array([1.0])) for _ in FINE_SHARES)
+    cases = {
+        "in the cache, synthetic query": queries[0].cells,
+        "in the cache, a real part": queries[1].cells,
+        "in the cache, a part holding none of the rows' cells": nothing,
+    }
+    per_slot: dict[str, list[float]] = {name: [] for name in [*cases, "from the 1M rows"]}
+    for _ in range(rounds + 1):  # the first round compiles or loads the kernel
+        for name, part in cases.items():
+            per_slot[name].append(_in_cache(part, blocks))
+        per_slot["from the 1M rows"].append(_from_index(queries[0].cells, index))
+    print(f"{threads} threads, {rounds} rounds, load average {os.getloadavg()[0]:.1f}:")
+    for name, values in per_slot.items():
+        print(f"- {name}: {statistics.median(values[1:]) * 1e9:.3f} ns a slot")
+
+
+def _in_cache(part, blocks, repeats: int = 1000) -> float:
+    """Seconds a slot of the kernel for ``part``, one thread per block, each scoring its block
+    ``repeats`` times: the median over the threads."""
+    from cfsig import cells_numba
+    from cfsig.nearest import parallel
+    from cfsig.parts import FINE_SHARES
+
+    score = cells_numba.part_scorer(part, FINE_SHARES)
+    took: list[float] = []
+
+    def work(block, _buffer, lock) -> None:
+        start = time.perf_counter()
+        for _ in range(repeats):
+            score(*block)
+        with lock:
+            took.append((time.perf_counter() - start) / (repeats * block[0].size))
+
+    parallel(blocks, work, lambda: None)
+    return statistics.median(took)
+
+
+def _from_index(part, index: Path) -> float:
+    """Seconds a slot spent in the kernel during ``cfsig query --partial``'s search of
+    ``index``: the median over the threads."""
+    from cfsig import cells_numba
+    from cfsig.index import IndexReader
+    from cfsig.parts import Part, partial_search
+
+    spent: dict[int, list[float]] = {}
+    made = cells_numba.part_scorer
+
+    def timed(part, shares):
+        score = made(part, shares)
+
+        def scorer(cells, fractions):
+            start = time.perf_counter()
+            out = score(cells, fractions)
+            mine = spent.setdefault(threading.get_ident(), [0.0, 0])
+            mine[0] += time.perf_counter() - start
+            mine[1] += cells.size
+            return out
+
+        return scorer
+
+    cells_numba.part_scorer = timed
+    try:
+        with IndexReader(index) as reader:
+            partial_search(reader, Part(cells=part), 20)
+    finally:
+        cells_numba.part_scorer = made
+    return statistics.median(seconds / slots for seconds, slots in spent.values())
 
 
 if __name__ == "__main__":
