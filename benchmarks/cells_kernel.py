@@ -147,10 +147,10 @@ def bounds(real, queries, index: Path, rounds: int) -> None:
     blocks = [tuple(a[t * rows : (t + 1) * rows] for a in stacked) for t in range(threads)]
     nothing = tuple((np.array([65_535]), np.array([1.0])) for _ in FINE_SHARES)
     cases = {
-        "in the cache, synthetic query": queries[0].cells,
-        "in the cache, a real part": queries[1].cells,
-        "in the cache, a part holding none of the rows' cells": nothing,
+        f"in the cache, {name} ({len(np.unique(np.concatenate([c for c, _ in part])))} cells)": part
+        for name, part in (("synthetic query", queries[0].cells), ("a real part", queries[1].cells))
     }
+    cases["in the cache, a part holding none of the rows' cells"] = nothing
     per_slot: dict[str, list[float]] = {name: [] for name in [*cases, "from the 1M rows"]}
     for _ in range(rounds + 1):  # the first round compiles or loads the kernel
         for name, part in cases.items():
