@@ -4,8 +4,8 @@ One pass over each row's slots, written as LLVM vector code (`numba.extending.in
 docs/partial.md, "Version 10: vector code"): each slot's cell finds its row of the part's table
 (row 0, all zeros, for the cells the part lacks), and its gains at all 16 lanes of shares are
 summed in registers, four slots a pass. A group of 16 slots whose fractions are all 0 (a row's
-padding) gains nothing and is skipped. Listing the held slots first, as an earlier kernel did,
-cost more than scoring the slots a part lacks.
+padding) gains nothing and is skipped; each group prefetches the slots `_AHEAD` on. Listing the
+held slots first, as an earlier kernel did, cost more than scoring the slots a part lacks.
 """
 
 from __future__ import annotations
