@@ -1,10 +1,11 @@
-"""Numba's fine-cell kernel of this checkout against that of an earlier commit (docs/partial.md).
+"""The fine-cell kernel of this checkout against that of an earlier commit (docs/partial.md).
 
     python benchmarks/cells_kernel.py --against REV --real INDEX --dir DIR
 
-The host's speed drifts by a tenth or more between runs, so a change to `cfsig.cells_numba` is
-judged here by a ratio in one process: ``cfsig/cells_numba.py`` as it was at commit REV (read
-with ``git show``) and as it is now, loaded side by side, take turns at the same
+The host's speed drifts by a tenth or more between runs, so a change to `cfsig.cells_llvm` is
+judged here by a ratio in one process: the kernel's module as it was at commit REV (read with
+``git show``: ``cfsig/cells_llvm.py``, or numba's ``cells_numba.py`` before it) and as it is
+now, loaded side by side, take turns at the same
 ``cfsig query --partial`` searches (`cfsig.parts.partial_search`), round after round, over the
 synthetic index of ``benchmarks/partial.py --scale`` in DIR (``partial-fine-ROWS``, built from
 INDEX, an index of SHREC 2007 of version 10: run that first). The queries are those of
@@ -41,14 +42,22 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 
 def load_kernel(rev: str | None, folder: Path):
-    """``cfsig.cells_numba`` at commit ``rev`` (None: this checkout's), as a module of its own;
-    numba caches its compiled code in ``folder``."""
-    if rev is None:
-        source = (ROOT / "cfsig" / "cells_numba.py").read_text()
+    """The fine-cell kernel's module at commit ``rev`` (None: this checkout's), as a module of
+    its own, written to ``folder``: ``cfsig/cells_llvm.py``, or before it ``cells_numba.py``
+    (numba's, which caches its compiled code in ``folder``; the extra ``bench``)."""
+    name = "kernel_before" if rev else "kernel_now"
+    for stem in ("cells_llvm", "cells_numba"):
+        if rev is None:
+            path = ROOT / "cfsig" / f"{stem}.py"
+            source = path.read_text() if path.exists() else None
+        else:
+            show = ["git", "-C", str(ROOT), "show", f"{rev}:cfsig/{stem}.py"]
+            done = subprocess.run(show, capture_output=True, text=True)
+            source = done.stdout if done.returncode == 0 else None
+        if source is not None:
+            break
     else:
-        show = ["git", "-C", str(ROOT), "show", f"{rev}:cfsig/cells_numba.py"]
-        source = subprocess.run(show, capture_output=True, text=True, check=True).stdout
-    name = "cells_numba_before" if rev else "cells_numba_now"
+        sys.exit(f"{rev or 'this checkout'}: no cfsig/cells_llvm.py nor cells_numba.py")
     path = folder / f"{name}.py"
     path.write_text(source)
     spec = importlib.util.spec_from_file_location(name, path)
@@ -60,7 +69,7 @@ def load_kernel(rev: str | None, folder: Path):
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--against", help="a commit: its cells_numba.py")
+    parser.add_argument("--against", help="a commit: its kernel's module")
     parser.add_argument("--bounds", action="store_true", help="time per slot, in and out of cache")
     parser.add_argument("--real", required=True, help="the index of SHREC 2007, version 10")
     parser.add_argument("--dir", type=Path, required=True, help="partial.py --scale's folder")
@@ -69,7 +78,7 @@ def main() -> None:
     args = parser.parse_args()
 
     import cfsig.cells
-    import cfsig.cells_numba
+    import cfsig.cells_llvm
     from benchmarks.index_scale import synthetic_query
     from benchmarks.partial import real_parts
     from cfsig.index import IndexReader
@@ -101,10 +110,10 @@ def main() -> None:
         }
         times = {(k, i): [] for k in kernels for i, _ in enumerate(queries)}
 
-        cfsig.cells.FAST_MIN_ROWS = 0  # numba's kernel at any size
+        cfsig.cells.FAST_MIN_ROWS = 0  # the compiled kernel at any size
 
         def search(kernel, part) -> float:
-            cfsig.cells_numba.part_scorer = kernel.part_scorer
+            cfsig.cells_llvm.part_scorer = kernel.part_scorer
             start = time.perf_counter()
             with IndexReader(index) as reader:
                 partial_search(reader, part, 20)
@@ -164,11 +173,11 @@ def bounds(real, queries, index: Path, rounds: int) -> None:
 def _in_cache(part, blocks, repeats: int = 1000) -> float:
     """Seconds a slot of the kernel for ``part``, one thread per block, each scoring its block
     ``repeats`` times: the median over the threads."""
-    from cfsig import cells_numba
+    from cfsig import cells_llvm
     from cfsig.nearest import parallel
     from cfsig.parts import FINE_SHARES
 
-    score = cells_numba.part_scorer(part, FINE_SHARES)
+    score = cells_llvm.part_scorer(part, FINE_SHARES)
     took: list[float] = []
 
     def work(block, _buffer, lock) -> None:
@@ -185,12 +194,12 @@ def _in_cache(part, blocks, repeats: int = 1000) -> float:
 def _from_index(part, index: Path) -> float:
     """Seconds a slot spent in the kernel during ``cfsig query --partial``'s search of
     ``index``: the median over the threads."""
-    from cfsig import cells_numba
+    from cfsig import cells_llvm
     from cfsig.index import IndexReader
     from cfsig.parts import Part, partial_search
 
     spent: dict[int, list[float]] = {}
-    made = cells_numba.part_scorer
+    made = cells_llvm.part_scorer
 
     def timed(part, shares):
         score = made(part, shares)
@@ -205,12 +214,12 @@ def _from_index(part, index: Path) -> float:
 
         return scorer
 
-    cells_numba.part_scorer = timed
+    cells_llvm.part_scorer = timed
     try:
         with IndexReader(index) as reader:
             partial_search(reader, Part(cells=part), 20)
     finally:
-        cells_numba.part_scorer = made
+        cells_llvm.part_scorer = made
     return statistics.median(seconds / slots for seconds, slots in spent.values())
 
 

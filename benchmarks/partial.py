@@ -384,7 +384,7 @@ def scale(rows: int, real: str, folder: Path, fill: str = "full", processes: int
     `cfsig.parts.partial_search` for 20 results and their names: the first query of the
     process (imports and compiled code loaded), then three more of each query. For version 10,
     each in processes of its own, whatever `cfsig.cells.part_scorer` would choose for so many
-    rows: with numba's kernel (in ``processes`` processes one after another: the first after
+    rows: with the compiled kernel (in ``processes`` processes one after another: the first after
     the files are read back meets pages read only once); with NumPy's (the synthetic query
     alone); and scoring nothing, what reading the cells costs.
     """
@@ -410,11 +410,11 @@ def scale(rows: int, real: str, folder: Path, fill: str = "full", processes: int
     parts = folder / "partial-real-parts.pickle"
     if cells is not None:
         named = real_parts(real, parts)
-    kernels = ["numba"] * processes + ["NumPy", "reading alone"] if cells is not None else [""]
+    kernels = ["compiled"] * processes + ["NumPy", "reading alone"] if cells is not None else [""]
     for n, kernel in enumerate(kernels):
         out = _time_partial(real, path, kernel, parts if kernel != "NumPy" else None)
-        if kernel == "numba" and processes > 1:
-            kernel = f"numba, process {n + 1}"
+        if kernel == "compiled" and processes > 1:
+            kernel = f"compiled, process {n + 1}"
         lines.append(
             f"- {kernel or 'query'}, synthetic query: **{statistics.median(out['times']):.3f} "
             "s** (median of 3; "
@@ -487,12 +487,12 @@ def real_parts(real: str, path: Path, count: int = 5) -> list[tuple[str, int]]:
 
 def _time_partial(real: str, path: Path, kernel: str, parts: Path | None) -> dict:
     """`scale`'s query in a fresh process: the first, then three more; with ``kernel`` for the
-    fine cells ("numba" or "NumPy"; "reading alone" scores every row 0), else as cfsig
+    fine cells ("compiled" or "NumPy"; "reading alone" scores every row 0), else as cfsig
     chooses. Then three of each real part pickled in ``parts`` (`real_parts`), if given."""
     from benchmarks.index_scale import K, in_child
 
     force = {
-        "numba": "cfsig.cells.FAST_MIN_ROWS = 0",
+        "compiled": "cfsig.cells.FAST_MIN_ROWS = 0",
         "NumPy": "cfsig.cells.FAST_MIN_ROWS = 1 << 62",
         "reading alone": "cfsig.parts.part_scorer = lambda *_: lambda c, f: np.zeros(len(c))",
     }.get(kernel, "")
@@ -541,7 +541,10 @@ def main() -> None:
         help="--scale, version 10: rows' cells fill every slot, or as many as real rows do",
     )
     parser.add_argument(
-        "--processes", type=int, default=1, help="--scale, version 10: numba's query timed in N"
+        "--processes",
+        type=int,
+        default=1,
+        help="--scale, version 10: the compiled kernel's query timed in N",
     )
     args = parser.parse_args()
     if args.scale:

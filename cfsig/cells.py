@@ -22,8 +22,8 @@ import numpy as np
 CURVATURE_RANGE = 6.0  # bins span asinh(value / CURVATURE_UNIT) in [-6, 6]: +-2000 in value
 CURVATURE_UNIT = 10.0  # about the sphere's 4 pi: the histogram is linear below, logarithmic above
 SLOTS = 1024  # cells kept per whole: 709 a whole is the median on SHREC 2007, 1,070 the most
-# Rows from which numba's kernel repays its import and loading its compiled code (about 0.4 s)
-# in a process's first query: docs/partial.md, "Scale", "Version 10: vector code".
+# Rows from which the compiled kernel repays compiling it (about 0.06 s) in a process's first
+# query: docs/partial.md, "Scale", "Version 10: vector code".
 FAST_MIN_ROWS = 2_000
 # A whole's `packed_cells`: (SLOTS,) uint16 cells and (SLOTS,) float32 fractions.
 Cells = tuple[np.ndarray, np.ndarray]
@@ -196,15 +196,16 @@ def cell_scores(
 def part_scorer(
     part: Sequence[tuple[np.ndarray, np.ndarray]], shares: tuple[float, ...], rows: int
 ) -> Scorer:
-    """`cell_scores` of one part, by numba's kernel (extra ``cfsig[fast]``) where it pays.
+    """`cell_scores` of one part, by the compiled kernel (extra ``cfsig[fast]``) where it pays.
 
     Parameters
     ----------
     part, shares
         As `cell_scores`.
     rows : int
-        Rows the search will score: from `FAST_MIN_ROWS`, numba's kernel if it loads
-        (`cfsig.cells_numba.part_scorer`, 10 to 100 times as fast), else `cell_scores`.
+        Rows the search will score: from `FAST_MIN_ROWS`, the compiled kernel if llvmlite is
+        installed (`cfsig.cells_llvm.part_scorer`, 10 to 100 times as fast), else
+        `cell_scores`.
 
     Returns
     -------
@@ -214,8 +215,8 @@ def part_scorer(
     """
     if rows >= FAST_MIN_ROWS:
         try:
-            fast = importlib.import_module("cfsig.cells_numba")
-        except (ImportError, RuntimeError):  # not installed; or no folder to cache its code in
+            fast = importlib.import_module("cfsig.cells_llvm")
+        except ImportError:  # llvmlite is not installed
             pass
         else:
             scorer: Scorer = fast.part_scorer(part, shares)

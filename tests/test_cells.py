@@ -3,9 +3,6 @@ their storage in an index."""
 
 import functools
 import os
-import subprocess
-import sys
-import textwrap
 from dataclasses import replace
 
 import h5py
@@ -108,7 +105,7 @@ def test_cell_scores_are_the_partial_distance():
 
 @pytest.mark.parametrize("slots", [400, 407])  # whole groups of 16 slots, and 7 left over
 def test_compiled_scores_are_numpys(slots):
-    pytest.importorskip("numba", reason="numba's kernel is the extra cfsig[fast]")
+    pytest.importorskip("llvmlite", reason="the compiled kernel is the extra cfsig[fast]")
     rng = np.random.default_rng(5)
     size, shares = 3000, FINE_SHARES
 
@@ -130,7 +127,7 @@ def test_compiled_scores_are_numpys(slots):
             w[16:48] = 0
         cells[row, : len(c)], fractions[row, : len(c)] = c, w
     fast = part_scorer(part, shares, FAST_MIN_ROWS)
-    assert not isinstance(fast, functools.partial)  # numba's, not cell_scores
+    assert not isinstance(fast, functools.partial)  # compiled, not cell_scores
     expected = cell_scores(part, shares, cells, fractions)
     got = fast(cells, fractions)
     assert got.dtype == np.float64 and got.shape == (300,)
@@ -140,54 +137,42 @@ def test_compiled_scores_are_numpys(slots):
 
 
 @pytest.mark.parametrize("cpu", ["x86-64", "haswell"])  # SSE2 only; AVX2 without AVX-512
-def test_compiled_scores_on_older_processors(tmp_path, cpu):
-    pytest.importorskip("numba", reason="numba's kernel is the extra cfsig[fast]")
+def test_compiled_scores_on_older_processors(monkeypatch, cpu):
+    cells_llvm = pytest.importorskip("cfsig.cells_llvm", reason="the extra cfsig[fast]")
     if os.uname().machine != "x86_64":
         pytest.skip("the processors named are x86's")
-    code = textwrap.dedent(
-        """
-        import numpy as np
-        from cfsig.cells import cell_scores
-        from cfsig.cells_numba import part_scorer
-        from cfsig.parts import FINE_SHARES
-        rng = np.random.default_rng(3)
-        def histogram(count):
-            c = np.sort(rng.choice(3000, count, replace=False))
-            w = rng.random(count)
-            return c, w / w.sum()
-        part = [histogram(200) for _ in FINE_SHARES]
-        cells, fractions = np.zeros((50, 407), np.uint16), np.zeros((50, 407), np.float32)
-        for row in range(50):
-            c, w = histogram(int(rng.integers(1, 407)))
-            cells[row, : len(c)], fractions[row, : len(c)] = c, w
-        got = part_scorer(part, FINE_SHARES)(cells, fractions)
-        print(np.abs(got - cell_scores(part, FINE_SHARES, cells, fractions)).max())
-        """
-    )
-    env = {**os.environ, "NUMBA_CPU_NAME": cpu, "NUMBA_CPU_FEATURES": ""}
-    env["NUMBA_CACHE_DIR"] = str(tmp_path)  # code compiled for another processor kept apart
-    done = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
-    )
-    assert float(done.stdout) < 1e-5
+    monkeypatch.setattr(cells_llvm, "_kernel", functools.partial(cells_llvm._kernel, cpu))
+    rng = np.random.default_rng(3)
+
+    def histogram(count):
+        c = np.sort(rng.choice(3000, count, replace=False))
+        w = rng.random(count)
+        return c, w / w.sum()
+
+    part = [histogram(200) for _ in FINE_SHARES]
+    cells, fractions = np.zeros((50, 407), np.uint16), np.zeros((50, 407), np.float32)
+    for row in range(50):
+        c, w = histogram(int(rng.integers(1, 407)))
+        cells[row, : len(c)], fractions[row, : len(c)] = c, w
+    got = cells_llvm.part_scorer(part, FINE_SHARES)(cells, fractions)
+    assert np.allclose(got, cell_scores(part, FINE_SHARES, cells, fractions), atol=1e-5)
 
 
 def test_compiled_scores_take_16_shares_at_most():
-    cells_numba = pytest.importorskip("cfsig.cells_numba", reason="the extra cfsig[fast]")
+    cells_llvm = pytest.importorskip("cfsig.cells_llvm", reason="the extra cfsig[fast]")
     part = [(np.array([1, 2]), np.array([0.5, 0.5]))] * 17
     with pytest.raises(ValueError, match="17 shares"):
-        cells_numba.part_scorer(part, (1.0,) * 17)
+        cells_llvm.part_scorer(part, (1.0,) * 17)
 
 
-@pytest.mark.parametrize("numba", ["small search", "not installed", "no cache folder"])
-def test_numpy_scores_without_numba(monkeypatch, numba):
+@pytest.mark.parametrize("case", ["small search", "not installed"])
+def test_numpy_scores_without_llvmlite(monkeypatch, case):
     part = [(np.array([1, 2]), np.array([0.5, 0.5]))]
-    rows = FAST_MIN_ROWS - 1 if numba == "small search" else FAST_MIN_ROWS
-    error = {"not installed": ImportError, "no cache folder": RuntimeError}.get(numba)
-    if error:
+    rows = FAST_MIN_ROWS - 1 if case == "small search" else FAST_MIN_ROWS
+    if case == "not installed":
 
         def fail(name):
-            raise error(f"{name}: as numba raises it")
+            raise ImportError(f"{name}: no module named llvmlite")
 
         monkeypatch.setattr("cfsig.cells.importlib.import_module", fail)
     scorer = part_scorer(part, (1.0,), rows)
@@ -274,12 +259,14 @@ def test_damaged_or_missing_cells_are_named(tmp_path):
         IndexReader(index)
 
 
-@pytest.fixture(params=["numpy", "numba"])
+@pytest.fixture(params=["numpy", "compiled"])
 def kernel(request, monkeypatch):
-    """The fine cells scored by NumPy's kernel, or by numba's (skipped without numba)."""
-    if request.param == "numba":
-        pytest.importorskip("numba", reason="numba's kernel is the extra cfsig[fast]")
-    monkeypatch.setattr("cfsig.cells.FAST_MIN_ROWS", 0 if request.param == "numba" else 1 << 62)
+    """The fine cells scored by NumPy's kernel, or by the compiled one (skipped without
+    llvmlite)."""
+    if request.param == "compiled":
+        pytest.importorskip("llvmlite", reason="the compiled kernel is the extra cfsig[fast]")
+    fast_min_rows = 0 if request.param == "compiled" else 1 << 62
+    monkeypatch.setattr("cfsig.cells.FAST_MIN_ROWS", fast_min_rows)
     return request.param
 
 
