@@ -24,7 +24,7 @@ CURVATURE_UNIT = 10.0  # about the sphere's 4 pi: the histogram is linear below,
 SLOTS = 1024  # cells kept per whole: 709 a whole is the median on SHREC 2007, 1,070 the most
 # Rows from which the compiled kernel repays compiling it (about 0.06 s) in a process's first
 # query: docs/partial.md, "Scale", "Version 10: vector code".
-FAST_MIN_ROWS = 2_000
+FAST_MIN_ROWS = 500
 # A whole's `packed_cells`: (SLOTS,) uint16 cells and (SLOTS,) float32 fractions.
 Cells = tuple[np.ndarray, np.ndarray]
 # A part's scores of blocks of wholes: ``scorer(cells, fractions)`` as `cell_scores`.
