@@ -22,8 +22,8 @@ import numpy as np
 CURVATURE_RANGE = 6.0  # bins span asinh(value / CURVATURE_UNIT) in [-6, 6]: +-2000 in value
 CURVATURE_UNIT = 10.0  # about the sphere's 4 pi: the histogram is linear below, logarithmic above
 SLOTS = 1024  # cells kept per whole: 709 a whole is the median on SHREC 2007, 1,070 the most
-# Rows from which the compiled kernel repays compiling it (about 0.06 s) in a process's first
-# query: docs/partial.md, "Scale", "Version 10: vector code".
+# Rows from which the compiled kernel repays compiling it (about 0.07 s) in a process's first
+# query: docs/partial.md, "Scale", "Compiled with llvmlite".
 FAST_MIN_ROWS = 500
 # A whole's `packed_cells`: (SLOTS,) uint16 cells and (SLOTS,) float32 fractions.
 Cells = tuple[np.ndarray, np.ndarray]
@@ -204,7 +204,7 @@ def part_scorer(
         As `cell_scores`.
     rows : int
         Rows the search will score: from `FAST_MIN_ROWS`, the compiled kernel if llvmlite is
-        installed (`cfsig.cells_llvm.part_scorer`, 10 to 100 times as fast), else
+        installed (`cfsig.cells_llvm.part_scorer`, 8 to 100 times as fast), else
         `cell_scores`.
 
     Returns
