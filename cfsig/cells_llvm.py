@@ -86,9 +86,8 @@ def part_scorer(
         cells = np.ascontiguousarray(cells, np.uint16)
         fractions = np.ascontiguousarray(fractions, np.float32)
         out = np.empty(len(cells))
-        if cells.size:
-            addresses = (a.ctypes.data for a in (offset, table, inverse, cells, fractions, out))
-            kernel(*addresses, len(out), cells.shape[1])
+        addresses = (a.ctypes.data for a in (offset, table, inverse, cells, fractions, out))
+        kernel(*addresses, *cells.shape)
         return out
 
     return scorer

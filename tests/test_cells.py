@@ -134,6 +134,7 @@ def test_compiled_scores_are_numpys(slots):
     assert np.allclose(got, expected, atol=1e-5)
     assert np.argmin(got) == np.argmin(expected)
     assert np.array_equal(fast(cells[:0], fractions[:0]), np.zeros(0))
+    assert np.array_equal(fast(cells[:2, :0], fractions[:2, :0]), [3.0, 3.0])  # no slots
 
 
 @pytest.mark.parametrize("cpu", ["x86-64", "haswell"])  # SSE2 only; AVX2 without AVX-512
