@@ -6,9 +6,9 @@ of the part's table (row 0, all zeros, for the cells the part lacks), and its ga
 lanes of shares are summed in registers, four slots a pass. A group of 16 slots whose fractions
 are all 0 (a row's padding) gains nothing and is skipped; each group prefetches the slots
 `_AHEAD` on. Listing the held slots first, as an earlier kernel did, cost more than scoring the
-slots a part lacks. Importing llvmlite and compiling take about 0.07 s, where numba, which
-wrapped the same code before, took a quarter of a second to import and load it
-(docs/partial.md, "Compiled with llvmlite").
+slots a part lacks. Importing llvmlite and compiling take about 0.07 s, a few times less than
+importing numba, which wrapped the same code before, and loading it (docs/partial.md,
+"Compiled with llvmlite").
 """
 
 from __future__ import annotations
