@@ -10,7 +10,7 @@ Stages (each prints Markdown for docs/descriptors.md; run from the repository ro
     python benchmarks/descriptors.py divisor    # a version's curvature divisor (version 3's rule)
     python benchmarks/descriptors.py tolerance  # version 6's conjugate gradients' tolerance
     python benchmarks/descriptors.py compare    # measures and CPU seconds per mesh, all eleven
-    python benchmarks/descriptors.py cost       # whole `cfsig index` runs: default, cf, ShapeDNA
+    python benchmarks/descriptors.py cost       # whole `cfsig index` runs, cf to ShapeDNA
     python benchmarks/descriptors.py noise      # which curvature scales survive vertex noise
     python benchmarks/descriptors.py coarse     # version 4: the spectrum of a simplified copy
     python benchmarks/descriptors.py stages     # CPU seconds of each stage of versions 3 to 8
@@ -910,13 +910,17 @@ def compare(args: argparse.Namespace) -> None:
     print("\n".join(f"- {k}: {'yes' if v else 'NO'}" for k, v in checks.items()))
 
 
-def _cfsig_index(folder: Path, descriptor: str | None, jobs: int) -> tuple[float, float]:
+def _cfsig_index(
+    folder: Path, descriptor: str | None, jobs: int, version: int | None = None
+) -> tuple[float, float]:
     """Wall and CPU seconds of one whole ``cfsig index`` process into a new index."""
     with tempfile.TemporaryDirectory() as tmp:
         command = [str(Path(sys.executable).with_name("cfsig")), "index", str(folder), "-o",
                    f"{tmp}/i.h5", "--jobs", str(jobs)]  # fmt: skip
         if descriptor:
             command += ["--descriptor", descriptor]
+        if version:
+            command += ["--descriptor-version", str(version)]
         return _timed_process(command)
 
 
@@ -937,7 +941,8 @@ def _timed_process(command: list[str]) -> tuple[float, float]:
 
 
 def cost(args: argparse.Namespace) -> None:
-    """Whole-process times of indexing with the default, with cf, and of ShapeDNA."""
+    """Whole-process times of indexing with the default, with cf, with version 10 (the default's
+    vector and the fine cells), and of ShapeDNA."""
     paths = sorted(collection_paths(args.data_root, "shrec07"), key=lambda p: int(p.stem))
     subset = paths[:: args.every]
     runs: dict[str, list[tuple[float, float]]] = {}
@@ -953,6 +958,9 @@ def cost(args: argparse.Namespace) -> None:
                 "ShapeDNA, 1 process": lambda: _shapedna_process(subset),
                 "default, all, 2 jobs": lambda: _cfsig_index(args.data_root / "shrec07", None, 2),
                 "cf, all, 2 jobs": lambda: _cfsig_index(args.data_root / "shrec07", "cf", 2),
+                "version 10, all, 2 jobs": lambda: _cfsig_index(
+                    args.data_root / "shrec07", None, 2, version=10
+                ),
             }
             order = list(timings) if round_ % 2 == 0 else list(timings)[::-1]
             for name in order:
@@ -971,6 +979,7 @@ def cost(args: argparse.Namespace) -> None:
         "default / cf": ("default, 1 job", "cf, 1 job"),
         "ShapeDNA / default": ("ShapeDNA, 1 process", "default, 1 job"),
         "ShapeDNA / cf": ("ShapeDNA, 1 process", "cf, 1 job"),
+        "version 10 / default, all": ("version 10, all, 2 jobs", "default, all, 2 jobs"),
     }
     for name, (top, bottom) in ratios.items():
         rounds = wall[top] / wall[bottom]
