@@ -76,6 +76,8 @@ def main() -> None:
     parser.add_argument("--rows", type=int, default=1_000_000)
     parser.add_argument("--rounds", type=int, default=5)
     args = parser.parse_args()
+    if args.against is None and not args.bounds:
+        parser.error("--against REV, or --bounds")
 
     import cfsig.cells
     import cfsig.cells_llvm
@@ -102,8 +104,6 @@ def main() -> None:
         if args.bounds:
             bounds(cells, [part for _, part in queries[:2]], index, args.rounds)
             return
-        if args.against is None:
-            parser.error("--against REV, or --bounds")
         kernels = {
             f"at {args.against}": load_kernel(args.against, Path(scratch)),
             "now": load_kernel(None, Path(scratch)),

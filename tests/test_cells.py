@@ -82,17 +82,18 @@ def _dense_scores(part, shares, cells, fractions, size):
     return np.min(out, axis=0)
 
 
+def _histogram(rng, count, size=3000):
+    """A random sparse histogram of mass 1: ``count`` of ``size`` cells, ascending."""
+    c = np.sort(rng.choice(size, count, replace=False))
+    w = rng.random(count)
+    return c, w / w.sum()
+
+
 def test_cell_scores_are_the_partial_distance():
     rng = np.random.default_rng(3)
     size, shares = 60, (1.0, 0.5, 0.25)
-
-    def histogram(count):
-        c = np.sort(rng.choice(size, count, replace=False))
-        w = rng.random(count)
-        return c, w / w.sum()
-
-    part = [histogram(10) for _ in shares]
-    wholes = [histogram(25) for _ in range(6)]
+    part = [_histogram(rng, 10, size) for _ in shares]
+    wholes = [_histogram(rng, 25, size) for _ in range(6)]
     cells = np.zeros((6, 32), np.uint16)
     fractions = np.zeros((6, 32), np.float32)
     for row, (c, w) in enumerate(wholes):
@@ -107,18 +108,12 @@ def test_cell_scores_are_the_partial_distance():
 def test_compiled_scores_are_numpys(slots):
     pytest.importorskip("llvmlite", reason="the compiled kernel is the extra cfsig[fast]")
     rng = np.random.default_rng(5)
-    size, shares = 3000, FINE_SHARES
-
-    def histogram(count):
-        c = np.sort(rng.choice(size, count, replace=False))
-        w = rng.random(count)
-        return c, w / w.sum()
-
-    part = [histogram(200) for _ in shares]
+    shares = FINE_SHARES
+    part = [_histogram(rng, 200) for _ in shares]
     cells = np.zeros((300, slots), np.uint16)
     fractions = np.zeros((300, slots), np.float32)
     for row in range(len(cells)):
-        c, w = histogram(int(rng.integers(1, slots)))
+        c, w = _histogram(rng, int(rng.integers(1, slots)))
         if row % 3 == 0:  # some of them the part's own cells, so that the scores spread
             c, w = part[row % len(shares)]
         w = w.copy()
@@ -144,16 +139,10 @@ def test_compiled_scores_on_older_processors(monkeypatch, cpu):
         pytest.skip("the processors named are x86's")
     monkeypatch.setattr(cells_llvm, "_kernel", functools.partial(cells_llvm._kernel, cpu))
     rng = np.random.default_rng(3)
-
-    def histogram(count):
-        c = np.sort(rng.choice(3000, count, replace=False))
-        w = rng.random(count)
-        return c, w / w.sum()
-
-    part = [histogram(200) for _ in FINE_SHARES]
+    part = [_histogram(rng, 200) for _ in FINE_SHARES]
     cells, fractions = np.zeros((50, 407), np.uint16), np.zeros((50, 407), np.float32)
     for row in range(50):
-        c, w = histogram(int(rng.integers(1, 407)))
+        c, w = _histogram(rng, int(rng.integers(1, 407)))
         cells[row, : len(c)], fractions[row, : len(c)] = c, w
     got = cells_llvm.part_scorer(part, FINE_SHARES)(cells, fractions)
     assert np.allclose(got, cell_scores(part, FINE_SHARES, cells, fractions), atol=1e-5)
