@@ -1,0 +1,155 @@
+"""What lowers a scanned part's partial query: remeshing, noise, and smoothing it (docs/scans.md).
+
+    python benchmarks/scans.py --data-root /work/data --doc docs/scans.md
+
+``benchmarks/partial.py``'s ``scan`` parts (a cut, remeshed to half its faces, every vertex moved
+by Gaussian noise of a tenth of the mean edge length) rank far below its cuts. This script takes
+one cut of every mesh of SHREC 2007, McGill and FAUST (`partial.cut`, seeded by the mesh's
+position) and changes it one way at a time: remeshed alone (`messy.remesh`), noise alone (3%
+and 10% of the mean edge length, the same draws scaled), both (a scan), and the scan smoothed by
+``k`` iterations of Taubin's lambda-mu filter on the uniform Laplacian (lambda 0.6307, mu
+-0.6732: G. Taubin, "A signal processing approach to fair surface design", SIGGRAPH 1995); and,
+for what smoothing costs a part without noise, the cut smoothed once. Each is a partial query
+against the whole collection, its own whole among it, on an index of the default ``cfhks``
+(version 9: the part's curvature channel) and of version 10 (its fine cells), each measured by
+`cfsig.parts.measure_part`: NN and own whole first by the partial distance, FT as
+``cfsig query --partial`` ranks (`cfsig.parts.expanded_distances`).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.update(
+    dict.fromkeys(["OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"], "1")
+)
+
+import argparse
+import subprocess
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import messy
+import numpy as np
+import scipy.sparse as sp
+from descriptors import collection_paths
+from partial import COLLECTIONS, DEFAULT, FINE, ROOT, cut
+
+from cfsig.geometry import mesh_edges
+from cfsig.measures import evaluate_queries
+from cfsig.mesh import Mesh, clean_mesh, read_mesh
+from cfsig.parts import expanded_distances, measure_part, partial_distances
+from cfsig.signature import compute_signature
+
+SMOOTHING = (1, 2, 5)  # Taubin iterations tried on the scans
+MARKER = "<!-- measured: what follows is written by benchmarks/scans.py -->"
+
+
+def taubin(mesh: Mesh, iterations: int) -> Mesh:
+    """``iterations`` pairs of Taubin's steps, forward 0.6307 and back -0.6732."""
+    n = len(mesh.vertices)
+    i, j = mesh_edges(mesh.faces, n).ends.T
+    adjacency = sp.coo_matrix((np.ones(2 * len(i)), (np.r_[i, j], np.r_[j, i])), (n, n)).tocsr()
+    average = sp.diags(1 / np.asarray(adjacency.sum(axis=1)).ravel()) @ adjacency
+    vertices = mesh.vertices
+    for _ in range(iterations):
+        for weight in (0.6307, -0.6732):
+            vertices = vertices + weight * (average @ vertices - vertices)
+    return clean_mesh(vertices, mesh.faces)
+
+
+def _jitter(mesh: Mesh, draws: np.ndarray, share: float) -> Mesh:
+    """Every vertex moved by ``draws`` (standard normal) times ``share`` of the mean edge."""
+    edges = mesh.vertices[mesh.faces] - mesh.vertices[np.roll(mesh.faces, 1, axis=1)]
+    sigma = share * float(np.linalg.norm(edges, axis=2).mean())
+    return clean_mesh(mesh.vertices + sigma * draws[: len(mesh.vertices)], mesh.faces)
+
+
+def variants(mesh: Mesh, seed: int) -> dict[str, Mesh]:
+    """One cut of a mesh, changed each way the script measures."""
+    part = cut(mesh, np.random.default_rng(seed))
+    remeshed = clean_mesh(*messy.remesh((part.vertices, part.faces), None))
+    draws = np.random.default_rng([seed, 1]).normal(size=part.vertices.shape)
+    scan = _jitter(remeshed, draws, 0.1)
+    return {
+        "cut": part,
+        "cut, remeshed": remeshed,
+        "cut, noise 3%": _jitter(part, draws, 0.03),
+        "cut, noise 10%": _jitter(part, draws, 0.1),
+        "scan: remeshed, noise 3%": _jitter(remeshed, draws, 0.03),
+        "scan: remeshed, noise 10%": scan,
+        **{f"scan, Taubin {k}": taubin(scan, k) for k in SMOOTHING},
+        "cut, Taubin 1": taubin(part, 1),
+    }
+
+
+def _one(item: tuple[Path, int]) -> tuple[np.ndarray, tuple, dict]:
+    """A whole's version 10 vector (the default's) and cells, and its changed cuts measured as
+    parts of each version."""
+    path, seed = item
+    mesh = read_mesh(path)
+    whole = compute_signature(mesh, FINE)
+    parts = {
+        (kind, params.version): measure_part(part, params)
+        for kind, part in variants(mesh, seed).items()
+        for params in (DEFAULT, FINE)
+    }
+    return whole.vector, whole.cells, parts
+
+
+def measure(name: str, data_root: Path, jobs: int, every: int) -> list[str]:
+    """The table's rows of one collection."""
+    paths = collection_paths(data_root, name)[::every]
+    with ProcessPoolExecutor(jobs) as pool:
+        rows = list(pool.map(_one, [(p, i) for i, p in enumerate(paths)], chunksize=2))
+    labels = [p.parent.name for p in paths]
+    wholes = np.array([r[0] for r in rows])
+    cells = np.array([r[1][0] for r in rows]), np.array([r[1][1] for r in rows])
+    lines = []
+    for kind, version in rows[0][2]:
+        parts = [r[2][kind, version] for r in rows]
+        params = FINE if version == FINE.version else DEFAULT
+        nearest = np.array([partial_distances(p, wholes, params, cells) for p in parts])
+        ranked = np.array([expanded_distances(p, wholes, params, cells) for p in parts])
+        nn = evaluate_queries(nearest, labels, labels).measures["NN"]
+        ft = evaluate_queries(ranked, labels, labels).measures["FT"]
+        own = np.mean(nearest.argmin(axis=1) == np.arange(len(rows)))
+        lines.append(f"| {name} | {kind} | {version} | {nn:.3f} | {ft:.3f} | {own:.3f} |")
+    return lines
+
+
+def main() -> None:
+    """Measure, print and write the Markdown."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data-root", type=Path, default=ROOT.parent / "shared" / "data")
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes")
+    parser.add_argument("--doc", type=Path, help="write the table into this Markdown file")
+    parser.add_argument("--every", type=int, default=1, help="every k-th mesh (a quick look)")
+    args = parser.parse_args()
+    lines = [
+        "| collection | part | version | NN | FT (--partial) | own whole first |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name in COLLECTIONS:
+        lines += measure(name, args.data_root, args.jobs, args.every)
+        print(lines[-1], flush=True)
+    commit = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True
+    ).stdout.strip()
+    every = f" --every {args.every}" if args.every > 1 else ""
+    text = "\n".join(
+        [
+            f"Measured on commit {commit} by `python benchmarks/scans.py --data-root "
+            f"{args.data_root}{every} --doc {args.doc}`:",
+            "",
+            *lines,
+        ]
+    )
+    print(text)
+    if args.doc:
+        head = args.doc.read_text().split(MARKER)[0] if args.doc.exists() else ""
+        args.doc.write_text(f"{head}{MARKER}\n\n{text}\n")
+
+
+if __name__ == "__main__":
+    main()
