@@ -1,6 +1,6 @@
-"""What lowers a scanned part's partial query: remeshing, noise, and smoothing it (docs/scans.md).
+"""What lowers a scanned part's partial query: remeshing, noise, and smoothing it (docs/partial-scans.md).
 
-    python benchmarks/scans.py --data-root /work/data --doc docs/scans.md
+    python benchmarks/partial_scans.py --data-root /work/data --doc docs/partial-scans.md
 
 ``benchmarks/partial.py``'s ``scan`` parts (a cut, remeshed to half its faces, every vertex moved
 by Gaussian noise of a tenth of the mean edge length) rank far below its cuts. This script takes
@@ -42,7 +42,7 @@ from cfsig.parts import expanded_distances, measure_part, partial_distances
 from cfsig.signature import compute_signature
 
 SMOOTHING = (1, 2, 5)  # Taubin iterations tried on the scans
-MARKER = "<!-- measured: what follows is written by benchmarks/scans.py -->"
+MARKER = "<!-- measured: what follows is written by benchmarks/partial_scans.py -->"
 
 
 def taubin(mesh: Mesh, iterations: int) -> Mesh:
@@ -139,7 +139,7 @@ def main() -> None:
     every = f" --every {args.every}" if args.every > 1 else ""
     text = "\n".join(
         [
-            f"Measured on commit {commit} by `python benchmarks/scans.py --data-root "
+            f"Measured on commit {commit} by `python benchmarks/partial_scans.py --data-root "
             f"{args.data_root}{every} --doc {args.doc}`:",
             "",
             *lines,
