@@ -1,4 +1,4 @@
-"""What lowers a scanned part's partial query: remeshing, noise, and smoothing it (docs/partial-scans.md).
+"""What lowers a scanned part's partial query: remeshing, noise, smoothing (docs/partial-scans.md).
 
     python benchmarks/partial_scans.py --data-root /work/data --doc docs/partial-scans.md
 
