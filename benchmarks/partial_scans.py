@@ -26,6 +26,7 @@ os.environ.update(
 
 import argparse
 import subprocess
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -58,25 +59,23 @@ def taubin(mesh: Mesh, iterations: int) -> Mesh:
     return clean_mesh(vertices, mesh.faces)
 
 
-def _jitter(mesh: Mesh, draws: np.ndarray, share: float) -> Mesh:
-    """Every vertex moved by ``draws`` (standard normal) times ``share`` of the mean edge."""
-    edges = mesh.vertices[mesh.faces] - mesh.vertices[np.roll(mesh.faces, 1, axis=1)]
-    sigma = share * float(np.linalg.norm(edges, axis=2).mean())
-    return clean_mesh(mesh.vertices + sigma * draws[: len(mesh.vertices)], mesh.faces)
-
-
 def variants(mesh: Mesh, seed: int) -> dict[str, Mesh]:
-    """One cut of a mesh, changed each way the script measures."""
+    """One cut of a mesh, changed each way the script measures; both levels of noise scale the
+    same draws."""
     part = cut(mesh, np.random.default_rng(seed))
     remeshed = clean_mesh(*messy.remesh((part.vertices, part.faces), None))
-    draws = np.random.default_rng([seed, 1]).normal(size=part.vertices.shape)
-    scan = _jitter(remeshed, draws, 0.1)
+
+    def noisy(surface: Mesh, level: Callable) -> Mesh:
+        draws = np.random.default_rng([seed, 1])
+        return clean_mesh(*level((surface.vertices, surface.faces), draws))
+
+    scan = noisy(remeshed, messy.noise)
     return {
         "cut": part,
         "cut, remeshed": remeshed,
-        "cut, noise 3%": _jitter(part, draws, 0.03),
-        "cut, noise 10%": _jitter(part, draws, 0.1),
-        "scan: remeshed, noise 3%": _jitter(remeshed, draws, 0.03),
+        "cut, noise 3%": noisy(part, messy.light_noise),
+        "cut, noise 10%": noisy(part, messy.noise),
+        "scan: remeshed, noise 3%": noisy(remeshed, messy.light_noise),
         "scan: remeshed, noise 10%": scan,
         **{f"scan, Taubin {k}": taubin(scan, k) for k in SMOOTHING},
         "cut, Taubin 1": taubin(part, 1),
