@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
+import subprocess
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -73,3 +74,32 @@ def timed(func: Callable[[], object]) -> tuple[object, float, float]:
     cpu, wall = time.process_time(), time.perf_counter()
     result = func()
     return result, time.process_time() - cpu, time.perf_counter() - wall
+
+
+def study_parser(description: str) -> argparse.ArgumentParser:
+    """A parser for a study of the collections that ``../shared/data/unpack`` puts under
+    ``--data-root``: with ``--jobs``, ``--doc`` and ``--every``, for a script to extend."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--data-root", type=Path, default=DEFAULT_DATA.parent)
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes")
+    parser.add_argument("--doc", type=Path, help="write the results into this Markdown file")
+    parser.add_argument("--every", type=int, default=1, help="every k-th mesh (a quick look)")
+    return parser
+
+
+def head_commit() -> str:
+    """The short hash of the checkout's HEAD: the commit a doc's figures were measured on."""
+    root = Path(__file__).resolve().parents[1]
+    git = ["git", "rev-parse", "--short", "HEAD"]
+    return subprocess.run(git, cwd=root, capture_output=True, text=True).stdout.strip()
+
+
+def report_measured(doc: Path | None, marker: str, command: str, lines: list[str]) -> None:
+    """Print ``lines`` under a line naming the commit and the ``command`` that measured them, and
+    write them into ``doc``, if given, in place of what follows ``marker``: the prose before it is
+    kept (all of a file that holds no marker yet)."""
+    text = "\n".join([f"Measured on commit {head_commit()} by `{command}`.", "", *lines])
+    print(text)
+    if doc is not None:
+        head = doc.read_text().split(marker)[0] if doc.exists() else ""
+        doc.write_text(f"{head}{marker}\n\n{text}\n")

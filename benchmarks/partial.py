@@ -46,11 +46,9 @@ os.environ.update(
     dict.fromkeys(["OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"], "1")
 )
 
-import argparse
 import collections
 import pickle
 import statistics
-import subprocess
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -59,6 +57,7 @@ from pathlib import Path
 import messy
 import numpy as np
 import scipy.sparse as sp
+from common import report_measured, study_parser
 from descriptors import collection_paths, shapedna
 from scipy.sparse.csgraph import connected_components, dijkstra
 
@@ -526,11 +525,7 @@ if {str(parts) if parts else ""!r}:
 
 def main() -> None:
     """Measure, print and write the Markdown."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data-root", type=Path, default=ROOT.parent / "shared" / "data")
-    parser.add_argument("--jobs", type=int, default=2, help="worker processes")
-    parser.add_argument("--doc", type=Path, help="write the tables into this Markdown file")
-    parser.add_argument("--every", type=int, default=1, help="every k-th mesh (a quick look)")
+    parser = study_parser(__doc__.splitlines()[0])
     parser.add_argument("--scale", type=int, help="time one partial query over this many rows")
     parser.add_argument("--real", help="--scale: an index of real cfhks signatures")
     parser.add_argument("--dir", type=Path, help="--scale: folder of the synthetic index")
@@ -556,35 +551,16 @@ def main() -> None:
     for name in COLLECTIONS:
         results[name] = _measure(name, args.data_root, args.jobs, args.every)
         print(f"{name}: {len(results[name]['labels'])} meshes", flush=True)
-    commit = subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True
-    ).stdout.strip()
-    text = "\n".join(
-        [
-            f"Measured on commit {commit} by `python benchmarks/partial.py --data-root "
-            f"{args.data_root} --doc {args.doc}`.",
-            "",
-            "### Parts against the whole collections",
-            "",
-            *_partial_table(results),
-            "",
-            "### The partial distance's weight (NN)",
-            "",
-            *_weight_table(results),
-            "",
-            "### Where each part's own whole ranks by the partial distance",
-            "",
-            *_own_whole_table(results),
-            "",
-            "### Genus outliers of SHREC 2007",
-            "",
-            *_genus_table(results["shrec07"]),
-        ]
-    )
-    print(text)
-    if args.doc:
-        head = args.doc.read_text().split(MARKER)[0] if args.doc.exists() else ""
-        args.doc.write_text(f"{head}{MARKER}\n\n{text}\n")
+    every = f" --every {args.every}" if args.every > 1 else ""
+    command = f"python benchmarks/partial.py --data-root {args.data_root}{every} --doc {args.doc}"
+    sections = [
+        ("Parts against the whole collections", _partial_table(results)),
+        ("The partial distance's weight (NN)", _weight_table(results)),
+        ("Where each part's own whole ranks by the partial distance", _own_whole_table(results)),
+        ("Genus outliers of SHREC 2007", _genus_table(results["shrec07"])),
+    ]
+    lines = [line for title, rows in sections for line in (f"### {title}", "", *rows, "")]
+    report_measured(args.doc, MARKER, command, lines[:-1])
 
 
 if __name__ == "__main__":

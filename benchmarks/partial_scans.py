@@ -24,8 +24,6 @@ os.environ.update(
     dict.fromkeys(["OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"], "1")
 )
 
-import argparse
-import subprocess
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -33,8 +31,9 @@ from pathlib import Path
 import messy
 import numpy as np
 import scipy.sparse as sp
+from common import report_measured, study_parser
 from descriptors import collection_paths
-from partial import COLLECTIONS, DEFAULT, FINE, ROOT, cut
+from partial import COLLECTIONS, DEFAULT, FINE, cut
 
 from cfsig.geometry import mesh_edges
 from cfsig.measures import evaluate_queries
@@ -119,11 +118,7 @@ def measure(name: str, data_root: Path, jobs: int, every: int) -> list[str]:
 
 def main() -> None:
     """Measure, print and write the Markdown."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data-root", type=Path, default=ROOT.parent / "shared" / "data")
-    parser.add_argument("--jobs", type=int, default=2, help="worker processes")
-    parser.add_argument("--doc", type=Path, help="write the table into this Markdown file")
-    parser.add_argument("--every", type=int, default=1, help="every k-th mesh (a quick look)")
+    parser = study_parser(__doc__.splitlines()[0])
     args = parser.parse_args()
     lines = [
         "| collection | part | version | NN | FT (--partial) | own whole first |",
@@ -132,22 +127,9 @@ def main() -> None:
     for name in COLLECTIONS:
         lines += measure(name, args.data_root, args.jobs, args.every)
         print(lines[-1], flush=True)
-    commit = subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True
-    ).stdout.strip()
     every = f" --every {args.every}" if args.every > 1 else ""
-    text = "\n".join(
-        [
-            f"Measured on commit {commit} by `python benchmarks/partial_scans.py --data-root "
-            f"{args.data_root}{every} --doc {args.doc}`:",
-            "",
-            *lines,
-        ]
-    )
-    print(text)
-    if args.doc:
-        head = args.doc.read_text().split(MARKER)[0] if args.doc.exists() else ""
-        args.doc.write_text(f"{head}{MARKER}\n\n{text}\n")
+    command = f"python benchmarks/partial_scans.py --data-root {args.data_root}{every}"
+    report_measured(args.doc, MARKER, f"{command} --doc {args.doc}", lines)
 
 
 if __name__ == "__main__":
