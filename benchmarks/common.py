@@ -94,12 +94,16 @@ def head_commit() -> str:
     return subprocess.run(git, cwd=root, capture_output=True, text=True).stdout.strip()
 
 
-def report_measured(doc: Path | None, marker: str, command: str, lines: list[str]) -> None:
-    """Print ``lines`` under a line naming the commit and the ``command`` that measured them, and
-    write them into ``doc``, if given, in place of what follows ``marker``: the prose before it is
-    kept (all of a file that holds no marker yet)."""
+def report_measured(args: argparse.Namespace, script: str, marker: str, lines: list[str]) -> None:
+    """Print ``lines`` under a line naming the commit and the command (``script`` with the
+    `study_parser` options ``args``) that measured them, and write them into ``args.doc``, if
+    given, in place of what follows ``marker``: the prose before it is kept (all of a file that
+    holds no marker yet)."""
+    every = f" --every {args.every}" if args.every > 1 else ""
+    doc = f" --doc {args.doc}" if args.doc else ""
+    command = f"python benchmarks/{script} --data-root {args.data_root}{every}{doc}"
     text = "\n".join([f"Measured on commit {head_commit()} by `{command}`.", "", *lines])
     print(text)
-    if doc is not None:
-        head = doc.read_text().split(marker)[0] if doc.exists() else ""
-        doc.write_text(f"{head}{marker}\n\n{text}\n")
+    if args.doc:
+        head = args.doc.read_text().split(marker)[0] if args.doc.exists() else ""
+        args.doc.write_text(f"{head}{marker}\n\n{text}\n")

@@ -551,8 +551,6 @@ def main() -> None:
     for name in COLLECTIONS:
         results[name] = _measure(name, args.data_root, args.jobs, args.every)
         print(f"{name}: {len(results[name]['labels'])} meshes", flush=True)
-    every = f" --every {args.every}" if args.every > 1 else ""
-    command = f"python benchmarks/partial.py --data-root {args.data_root}{every} --doc {args.doc}"
     sections = [
         ("Parts against the whole collections", _partial_table(results)),
         ("The partial distance's weight (NN)", _weight_table(results)),
@@ -560,7 +558,7 @@ def main() -> None:
         ("Genus outliers of SHREC 2007", _genus_table(results["shrec07"])),
     ]
     lines = [line for title, rows in sections for line in (f"### {title}", "", *rows, "")]
-    report_measured(args.doc, MARKER, command, lines[:-1])
+    report_measured(args, "partial.py", MARKER, lines[:-1])
 
 
 if __name__ == "__main__":

@@ -88,7 +88,7 @@ def _one(item: tuple[Path, int]) -> tuple[np.ndarray, tuple, dict]:
     mesh = read_mesh(path)
     whole = compute_signature(mesh, FINE)
     parts = {
-        (kind, params.version): measure_part(part, params)
+        (kind, params): measure_part(part, params)
         for kind, part in variants(mesh, seed).items()
         for params in (DEFAULT, FINE)
     }
@@ -104,15 +104,15 @@ def measure(name: str, data_root: Path, jobs: int, every: int) -> list[str]:
     wholes = np.array([r[0] for r in rows])
     cells = np.array([r[1][0] for r in rows]), np.array([r[1][1] for r in rows])
     lines = []
-    for kind, version in rows[0][2]:
-        parts = [r[2][kind, version] for r in rows]
-        params = FINE if version == FINE.version else DEFAULT
+    for kind, params in rows[0][2]:
+        parts = [r[2][kind, params] for r in rows]
         nearest = np.array([partial_distances(p, wholes, params, cells) for p in parts])
         ranked = np.array([expanded_distances(p, wholes, params, cells) for p in parts])
         nn = evaluate_queries(nearest, labels, labels).measures["NN"]
         ft = evaluate_queries(ranked, labels, labels).measures["FT"]
         own = np.mean(nearest.argmin(axis=1) == np.arange(len(rows)))
-        lines.append(f"| {name} | {kind} | {version} | {nn:.3f} | {ft:.3f} | {own:.3f} |")
+        row = f"{kind} | {params.version} | {nn:.3f} | {ft:.3f} | {own:.3f}"
+        lines.append(f"| {name} | {row} |")
     return lines
 
 
@@ -127,9 +127,7 @@ def main() -> None:
     for name in COLLECTIONS:
         lines += measure(name, args.data_root, args.jobs, args.every)
         print(lines[-1], flush=True)
-    every = f" --every {args.every}" if args.every > 1 else ""
-    command = f"python benchmarks/partial_scans.py --data-root {args.data_root}{every}"
-    report_measured(args.doc, MARKER, f"{command} --doc {args.doc}", lines)
+    report_measured(args, "partial_scans.py", MARKER, lines)
 
 
 if __name__ == "__main__":
