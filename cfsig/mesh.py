@@ -16,8 +16,11 @@ from .errors import MeshError, MissingDependencyError
 from .files import MESH_SUFFIXES
 from .geometry import Edges, mesh_edges
 
-# Larger coordinates overflow in squared lengths and products of them (float64 ends at 1.8e308).
-MAX_COORDINATE = 1e100
+# The Laplacian and the curvature take products of up to four lengths, which end float64 near
+# 1e+-77: larger coordinates overflow, a smaller span underflows. The bounds keep a wide margin;
+# tests/test_bad_input.py checks every descriptor and partial queries just inside them.
+MAX_COORDINATE = 1e50
+MIN_SPAN = 1e-50
 
 
 @dataclass(frozen=True)
@@ -158,8 +161,8 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, weld: bool = True) -> Me
     Raises
     ------
     MeshError
-        Non-finite coordinates or beyond `MAX_COORDINATE`, face indices out of range, or no
-        triangle left.
+        Non-finite coordinates, beyond `MAX_COORDINATE` or spanning less than `MIN_SPAN`, face
+        indices out of range, no triangle left, or none with an area.
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces)
@@ -174,6 +177,11 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, weld: bool = True) -> Me
         raise MeshError(
             f"coordinates up to {np.abs(vertices).max():.3g}: beyond {MAX_COORDINATE:g}, areas "
             "and curvatures overflow"
+        )
+    span = float(np.ptp(vertices, axis=0).max())
+    if 0 < span < MIN_SPAN:
+        raise MeshError(
+            f"coordinates span {span:.3g}: below {MIN_SPAN:g}, areas and curvatures underflow"
         )
     if not np.issubdtype(faces.dtype, np.integer):
         raise MeshError("face indices are not integers")
@@ -201,6 +209,9 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, weld: bool = True) -> Me
         faces = faces[np.sort(first)]
     if len(faces) == 0:
         raise MeshError("no triangles left after dropping degenerate faces")
+    corners = vertices[faces]
+    if not np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]).any():
+        raise MeshError("the triangles have no area: every one is degenerate")
     used = np.zeros(len(vertices), dtype=bool)
     used[faces.ravel()] = True
     if not used.all():

@@ -1,6 +1,7 @@
 """Every bad input gives a right answer or a one-line error naming the file, never a crash."""
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -13,9 +14,16 @@ from cfsig.params import Params
 from cfsig.signature import compute_signature, signature_file
 from tests.helpers import disk, icosphere, off_text, open_cylinder
 
+CFHKS = Params(descriptor="cfhks")
+
 
 def _compute(path, *extra):
     return CliRunner().invoke(main, ["compute", *extra, str(path)])
+
+
+def _tetrahedron(size: float):
+    vertices = size * np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    return vertices, [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]
 
 
 BAD_FILES = {
@@ -30,6 +38,9 @@ BAD_FILES = {
     "range.off": (b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n", "out of range"),
     "negative.off": (b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n", "out of range"),
     "allbad.off": (b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 0 1\n", "no triangles left"),
+    "flat.off": (b"OFF\n4 2 0\n0 0 0\n1 0 0\n2 0 0\n3 0 0\n3 0 1 2\n3 1 2 3\n", "no area"),
+    "large.off": (off_text(*_tetrahedron(1e51)).encode(), "beyond 1e+50"),
+    "small.off": (off_text(*_tetrahedron(1e-51)).encode(), "below 1e-50"),
     "garbage.obj": (b"v 1 2\nf 1 2 3 4 5\n" * 3, "OBJ"),
     "garbage.ply": (b"ply\nformat ascii 1.0\nelement vertex 99\nend_header\n1 2\n", "PLY"),
     "garbage.stl": (b"solid x\nfacet normal\nendsolid\n", "no triangles"),
@@ -162,3 +173,25 @@ def test_query_mesh_that_fails(tmp_path, build_index):
     result = CliRunner().invoke(main, ["query", str(tmp_path / "i.h5"), str(tmp_path / "q.off")])
     assert result.exit_code == 1
     assert result.output.strip() == f"Error: {tmp_path / 'q.off'}: not an OFF file (no OFF header)"
+
+
+@pytest.mark.parametrize("scale", [3e49, 1e-50], ids=["large", "small"])
+def test_meshes_at_the_bounds_of_scale_are_measured_cleanly(scale):
+    # Just inside MAX_COORDINATE and MIN_SPAN: every descriptor (the open cylinder through the
+    # repair stage) and partial queries give finite values without a warning.
+    from cfsig.parts import measure_part
+    from tests.test_parts import _bumpy, _cut
+
+    v, f = _bumpy()
+    assert np.abs(v * scale).max() <= 1e50 and np.ptp(v * scale, axis=0).max() >= 1e-50
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for vertices, faces in ((v, f), open_cylinder()):
+            mesh = read_mesh_arrays(vertices * scale, faces)
+            for params in (Params(), CFHKS, Params(descriptor="cfhks", version=10)):
+                assert np.isfinite(compute_signature(mesh, params).vector).all()
+        part = read_mesh_arrays(*_cut(v * scale, f, 0.3))
+        for version in (9, 10):
+            measured = measure_part(part, Params(descriptor="cfhks", version=version))
+            values = measured.vectors if measured.cells is None else measured.cells[0][1]
+            assert np.isfinite(values).all()
