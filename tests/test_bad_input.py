@@ -9,12 +9,10 @@ import trimesh
 from click.testing import CliRunner
 
 from cfsig.cli import EXIT_SKIPPED, main
-from cfsig.mesh import read_mesh
+from cfsig.mesh import MAX_COORDINATE, MIN_SPAN, read_mesh
 from cfsig.params import Params
 from cfsig.signature import compute_signature, signature_file
 from tests.helpers import disk, icosphere, off_text, open_cylinder
-
-CFHKS = Params(descriptor="cfhks")
 
 
 def _compute(path, *extra):
@@ -184,12 +182,15 @@ def test_meshes_at_the_bounds_of_scale_are_measured_cleanly(scale):
 
     sphere, cylinder = icosphere(3), open_cylinder()
     for v, _ in (sphere, cylinder):
-        assert np.abs(v * scale).max() <= 1e50 and np.ptp(v * scale, axis=0).max() >= 1e-50
+        largest, span = np.abs(v * scale).max(), np.ptp(v * scale, axis=0).max()
+        assert largest <= MAX_COORDINATE and span >= MIN_SPAN
+        assert largest >= MAX_COORDINATE / 10 or span <= 10 * MIN_SPAN  # near a bound
+    descriptors = (Params(), Params(descriptor="cfhks"), Params(descriptor="cfhks", version=10))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         for v, f in (sphere, cylinder):
             mesh = read_mesh_arrays(v * scale, f)
-            for params in (Params(), CFHKS, Params(descriptor="cfhks", version=10)):
+            for params in descriptors:
                 assert np.isfinite(compute_signature(mesh, params).vector).all()
         part = read_mesh_arrays(cylinder[0] * scale, cylinder[1])
         for version in (9, 10):
