@@ -60,9 +60,11 @@ def load_kernel(rev: str | None, folder: Path):
         sys.exit(f"{rev or 'this checkout'}: no cfsig/cells_llvm.py nor cells_numba.py")
     path = folder / f"{name}.py"
     path.write_text(source)
-    spec = importlib.util.spec_from_file_location(name, path)
+    # A module of the package cfsig, so that its relative imports resolve.
+    spec = importlib.util.spec_from_file_location(f"cfsig.{name}", path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
     spec.loader.exec_module(module)
     return module
 

@@ -1,14 +1,17 @@
 """The fine-cell kernel, compiled by LLVM (optional extra ``cfsig[fast]``); see `cfsig.cells`.
 
 One pass over each row's slots, written as LLVM vector code with llvmlite and compiled for this
-CPU once a process (docs/partial.md, "Version 10: vector code"): each slot's cell finds its row
-of the part's table (row 0, all zeros, for the cells the part lacks), and its gains at all 16
-lanes of shares are summed in registers, four slots a pass. A group of 16 slots whose fractions
-are all 0 (a row's padding) gains nothing and is skipped; each group prefetches the slots
-`_AHEAD` on. Listing the held slots first, as an earlier kernel did, cost more than scoring the
-slots a part lacks. Importing llvmlite and compiling take about 0.07 s, a few times less than
-importing numba, which wrapped the same code before, and loading it (docs/partial.md,
-"Compiled with llvmlite").
+CPU once a process (docs/partial.md, "Version 10: vector code"). A group of 16 slots has its
+fractions rounded to units (`cfsig.cells.area_units`), or is skipped when they are all 0 (a
+row's padding); each slot's cell then finds its row of the part's table (row 0, all zeros, for
+the cells the part lacks), whose 32 lanes of 16 bits, ``f p`` and ``p`` at each share, take
+their minimum with the slot's units and are summed in registers. The sums are integers, so the
+scores are `cfsig.cells.cell_scores`' to the last bit. Each group prefetches the slots `_AHEAD`
+on. Loads bound the kernel, not arithmetic: the cells are read four at a time and the table's
+rows are found through 16-bit numbers. Listing the held slots first, as an earlier kernel did,
+cost more than scoring the slots a part lacks. Importing llvmlite and compiling take about
+0.07 s, a few times less than importing numba, which wrapped the same code before, and loading
+it (docs/partial.md, "Compiled with llvmlite").
 """
 
 from __future__ import annotations
@@ -17,28 +20,31 @@ import contextlib
 import ctypes
 import functools
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 
 import llvmlite.binding as llvm
 import numpy as np
 from llvmlite import ir
 
-_LANES = 16  # shares a vector holds: a part has at most that many, padded
+from .cells import UNIT, part_table
+
+_LANES = 16  # shares a table row holds: a part has at most that many, padded
 _ALIGN = 64  # bytes: a table row is one cache line
 _FLOAT = ir.FloatType()
+_DOUBLE = ir.DoubleType()
+_SHORT = ir.IntType(16)
 _INT = ir.IntType(32)
 _WIDE = ir.IntType(64)
 _BYTES = ir.IntType(8).as_pointer()
 _FLOATS = ir.VectorType(_FLOAT, _LANES)
-_INTS = ir.VectorType(_INT, _LANES)
-# A multiplication and an addition may fuse, but no sum is reordered: each waits on one addition
-# a pass of four cells, where a free reordering chained three.
-_FUSE = ("contract",)
+_UNITS = ir.VectorType(_SHORT, _LANES)  # a group's fractions in units
+_ROW = ir.VectorType(_SHORT, 2 * _LANES)  # a table row: f p, then p, at each share
 # Slots ahead whose fractions and cells are asked for before they are read: rows come from the
 # page cache in pages of 4 KB, across which the hardware's own prefetching stops
 # (docs/partial.md, "Version 10: vector code"; 256 to 4,096 measured alike).
 _AHEAD = 512
-# scores(offset, table, inverse, cells, fractions, out, rows, width): the addresses of the
-# arrays `part_scorer` lays out, then two counts; ctypes releases the GIL while it runs.
+# scores(rows, table, masses, explained, cells, fractions, out, count, width): the addresses of
+# `cfsig.cells.part_table`'s arrays and the wholes', then two counts; ctypes releases the GIL.
 _Kernel = Callable[..., None]
 
 
@@ -47,8 +53,8 @@ def part_scorer(
 ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
     """`cfsig.cells.cell_scores` of one part, compiled: one pass over each row's cells.
 
-    The part's histograms are laid out once, for every block of rows the scorer is given. It
-    sums in float32 where the NumPy kernel sums in float64: the two differ by about 1e-6.
+    The part's histograms are laid out once (`cfsig.cells.part_table`), for every block of rows
+    the scorer is given. The scores are `cfsig.cells.cell_scores`' to the last bit.
 
     Parameters
     ----------
@@ -61,8 +67,7 @@ def part_scorer(
     -------
     scorer : callable
         ``scorer(cells, fractions)``: the wholes' (m, slots) uint16 `cfsig.cells.packed_cells`
-        and their (m, slots) float32 fractions to their (m,) float64 scores, in [0, 3];
-        releases the GIL.
+        and their (m, slots) float32 fractions to their (m,) float64 scores; releases the GIL.
 
     Raises
     ------
@@ -71,33 +76,30 @@ def part_scorer(
     """
     if len(shares) > _LANES:
         raise ValueError(f"{len(shares)} shares: the compiled kernel takes at most {_LANES}")
-    held = np.unique(np.concatenate([np.asarray(c, np.int64) for c, _ in part]))
-    # Where a cell's row of the table starts, in floats; 0 for the cells the part lacks.
-    offset = np.zeros(1 << 16, np.uint32)
-    offset[held] = np.arange(1, len(held) + 1) * _LANES
-    table = _aligned_zeros((len(held) + 1) * _LANES).reshape(-1, _LANES)
-    for j, (c, p) in enumerate(part):
-        table[offset[c] // _LANES, j] = p
-    inverse = np.ones(_LANES, np.float32)  # a padding share's table is 0: it gains nothing
-    inverse[: len(shares)] = 1 / np.asarray(shares)
+    rows, table, masses, explained = part_table(part, shares, _LANES)
+    table = _aligned(table)
+    # A padding share's mass is far above any other's: its score, about 16,500, is never the least.
+    masses = np.where(np.arange(_LANES) < len(shares), masses, 1 << 30).astype(np.int32)
     kernel = _kernel()
 
     def scorer(cells: np.ndarray, fractions: np.ndarray) -> np.ndarray:
         cells = np.ascontiguousarray(cells, np.uint16)
         fractions = np.ascontiguousarray(fractions, np.float32)
         out = np.empty(len(cells))
-        addresses = (a.ctypes.data for a in (offset, table, inverse, cells, fractions, out))
-        kernel(*addresses, *cells.shape)
+        arrays = (rows, table, masses, explained, cells, fractions, out)
+        kernel(*(a.ctypes.data for a in arrays), *cells.shape)
         return out
 
     return scorer
 
 
-def _aligned_zeros(count: int) -> np.ndarray:
-    """(count,) float32 zeros starting on a cache line."""
-    spare = np.zeros(count + _ALIGN // 4, np.float32)
-    skip = (-spare.ctypes.data % _ALIGN) // 4
-    return spare[skip : skip + count]
+def _aligned(array: np.ndarray) -> np.ndarray:
+    """A copy of ``array`` starting on a cache line."""
+    spare = np.zeros(array.nbytes + _ALIGN, np.uint8)
+    skip = -spare.ctypes.data % _ALIGN
+    out = spare[skip : skip + array.nbytes].view(array.dtype).reshape(array.shape)
+    out[...] = array
+    return out
 
 
 @functools.cache
@@ -115,31 +117,46 @@ def _kernel(cpu: str | None = None) -> _Kernel:
     passes.getModulePassManager().run(module, passes)
     engine = llvm.create_mcjit_compiler(module, machine)
     engine.finalize_object()
-    arguments = [ctypes.c_void_p] * 6 + [ctypes.c_int64] * 2
+    arguments = [ctypes.c_void_p] * 7 + [ctypes.c_int64] * 2
     function = ctypes.CFUNCTYPE(None, *arguments)(engine.get_function_address("scores"))
     function.engine = engine  # type: ignore[attr-defined]
     return function
 
 
 def _module() -> ir.Module:
-    """``scores``: ``out[i] = 3 - gain`` of row i of ``rows`` rows of ``width`` slots."""
+    """``scores``: ``out[i]``, the score of row i of ``count`` rows of ``width`` slots."""
     module = ir.Module(name="cells")
-    floats, cells_type, words = _FLOAT.as_pointer(), ir.IntType(16).as_pointer(), _INT.as_pointer()
-    signature = ir.FunctionType(
-        ir.VoidType(),
-        [words, floats, floats, cells_type, floats, ir.DoubleType().as_pointer(), _WIDE, _WIDE],
-    )
-    function = ir.Function(module, signature, "scores")
-    offsets, table, inverses, cells, fractions, out, rows, width = function.args
+    shorts, words = _SHORT.as_pointer(), _INT.as_pointer()
+    doubles = _DOUBLE.as_pointer()
+    arguments = [shorts, shorts, words, doubles, shorts, _FLOAT.as_pointer(), doubles, _WIDE, _WIDE]
+    function = ir.Function(module, ir.FunctionType(ir.VoidType(), arguments), "scores")
+    rows, table, masses, explained, cells, fractions, out, count, width = function.args
     builder = ir.IRBuilder(function.append_basic_block("entry"))
-    sums = [builder.alloca(_FLOATS) for _ in range(2)]
-    inverse = _load_vector(builder, inverses, _WIDE(0))
-    with _loop(builder, _WIDE(0), rows, 1) as i:
-        gain = _row_gain(builder, offsets, table, inverse, cells, fractions, sums, i, width)
-        score = builder.fsub(ir.DoubleType()(3.0), builder.fpext(gain, ir.DoubleType()))
+    room = _Room(
+        sums=(builder.alloca(_ROW), builder.alloca(_ROW)),
+        whole=builder.alloca(_UNITS),
+        units=builder.alloca(_UNITS),
+    )
+    constants = (
+        _load(builder, masses, _WIDE(0), _LANES),
+        _load(builder, explained, _WIDE(0), _LANES),
+    )
+    with _loop(builder, _WIDE(0), count, 1) as i:
+        sums, whole = _row_sums(builder, room, rows, table, cells, fractions, i, width)
+        score = _row_score(builder, sums, whole, *constants)
         builder.store(score, builder.gep(out, [i]))
     builder.ret_void()
     return module
+
+
+@dataclass(frozen=True)
+class _Room:
+    """Stack room of the kernel: the row's two sums of table rows, its sum of the whole's units
+    in 16 lanes, and a group's units, read back slot by slot."""
+
+    sums: tuple[ir.AllocaInstr, ir.AllocaInstr]
+    whole: ir.AllocaInstr
+    units: ir.AllocaInstr
 
 
 @contextlib.contextmanager
@@ -161,76 +178,121 @@ def _loop(builder: ir.IRBuilder, start, stop, step: int) -> Iterator[ir.Value]:
     builder.position_at_end(done)
 
 
-def _load_vector(builder, pointer, at):
-    """The 16 float32 at ``pointer + at``."""
-    start = builder.bitcast(builder.gep(pointer, [at]), _FLOATS.as_pointer())
-    return builder.load(start, align=4)
+def _load(builder, pointer, at, lanes: int):
+    """The ``lanes`` values at ``pointer + at``, as a vector."""
+    kind = ir.VectorType(pointer.type.pointee, lanes)
+    return builder.load(builder.bitcast(builder.gep(pointer, [at]), kind.as_pointer()), align=2)
 
 
-def _splat(builder, value):
-    """16 copies of a float32."""
-    one = builder.insert_element(ir.Constant(_FLOATS, ir.Undefined), value, _INT(0))
-    return builder.shuffle_vector(one, one, ir.Constant(_INTS, [0] * _LANES))
+def _splat(builder, value, lanes: int):
+    """``lanes`` copies of a value."""
+    kind = ir.VectorType(value.type, lanes)
+    one = builder.insert_element(ir.Constant(kind, ir.Undefined), value, _INT(0))
+    return builder.shuffle_vector(one, one, ir.Constant(ir.VectorType(_INT, lanes), [0] * lanes))
 
 
-def _minimum(builder, a, b):
-    """Lane by lane: one instruction."""
-    return builder.select(builder.fcmp_ordered("<", a, b), a, b)
+def _call(builder, name: str, result, *values):
+    """Call the LLVM intrinsic ``name`` on ``values``."""
+    kind = ir.FunctionType(result, [v.type for v in values])
+    found = builder.module.globals.get(name) or ir.Function(builder.module, kind, name)
+    return builder.call(found, list(values))
 
 
-def _row_gain(builder, offsets, table, inverse, cells, fractions, sums, row, width):
-    """The largest over the shares of ``3 - score`` of row ``row``, summed slot by slot:
-    ``min(f p, w) / f + 2 min(p, w)``. Groups of 16 slots, then the last ``width % 16`` one by
-    one; ``sums``: two vectors' room for the sums."""
-    two = ir.Constant(_FLOATS, [2.0] * _LANES)
-    nothing = ir.Constant(_FLOATS, [0.0] * _LANES)
-    for total in sums:  # two sums, each of two slots a pass of four: kept in registers
-        builder.store(nothing, total)
+def _units(builder, fractions):
+    """`cfsig.cells.area_units` of a <16 x float>: scaled in float32, clipped to [0, UNIT],
+    rounded to the nearest (ties to even, as NumPy's ``rint``)."""
+    low, high = (ir.Constant(_FLOATS, [v] * _LANES) for v in (0.0, float(UNIT)))
+    scaled = builder.fmul(fractions, high)
+    scaled = builder.select(builder.fcmp_ordered("<", scaled, low), low, scaled)
+    scaled = builder.select(builder.fcmp_ordered(">", scaled, high), high, scaled)
+    return builder.fptoui(_call(builder, "llvm.rint.v16f32", _FLOATS, scaled), _UNITS)
 
-    def gain(at):
-        cell = builder.zext(builder.load(builder.gep(cells, [at])), _WIDE)
-        where = builder.zext(builder.load(builder.gep(offsets, [cell])), _WIDE)
-        p = _load_vector(builder, table, where)
-        w = _splat(builder, builder.load(builder.gep(fractions, [at])))
-        explained = _minimum(builder, p, builder.fmul(w, inverse))
-        common = builder.fmul(two, _minimum(builder, p, w), flags=_FUSE)
-        return builder.fadd(explained, common, flags=_FUSE)
+
+def _row_sums(builder, room, rows, table, cells, fractions, row, width):
+    """Row ``row``'s sums, slot by slot: of ``min(f p, w)`` and ``min(p, w)`` in the 32 lanes of
+    a table row (two sums, alternate slots), and of ``w`` in 16 lanes, all in units of 16 bits.
+    Groups of 16 slots, then the last ``width % 16`` one by one."""
+    for total, kind in ((room.sums[0], _ROW), (room.sums[1], _ROW), (room.whole, _UNITS)):
+        builder.store(ir.Constant(kind, [0] * kind.count), total)
+    # An empty asm statement hides that a group's slots read back the units just stored: else
+    # LLVM takes each from the group's vector by a shuffle, on a port the arithmetic needs,
+    # rather than by a load.
+    units = builder.bitcast(room.units, _SHORT.as_pointer())
+    hidden = builder.asm(ir.FunctionType(units.type, [units.type]), "", "=r,0", [units], False)
 
     def add(total, value):
-        builder.store(builder.fadd(builder.load(total), value), total)
+        builder.store(builder.add(builder.load(total), value), total)
 
-    # An empty asm statement hides that the test of a group reads the fractions that its slots
-    # then read one by one: else LLVM takes each slot's fraction from the test's vector by a
-    # shuffle, on a port the arithmetic needs, rather than by a load.
-    hidden = builder.asm(
-        ir.FunctionType(fractions.type, [fractions.type]), "", "=r,0", [fractions], False
-    )
-    prefetch = ir.Function(
-        builder.module,
-        ir.FunctionType(ir.VoidType(), [_BYTES, _INT, _INT, _INT]),
-        "llvm.prefetch.p0",
-    )
+    def gain(cell, total, w):
+        at = builder.zext(builder.load(builder.gep(rows, [cell])), _WIDE)
+        held = _load(builder, table, builder.shl(at, _WIDE(5)), 2 * _LANES)  # 32 units a row
+        add(total, builder.select(builder.icmp_unsigned("<", held, w), held, w))
+
     start = builder.mul(row, width)
     stop = builder.add(start, width)
     groups = builder.sub(stop, builder.srem(width, width.type(_LANES)))
     with _loop(builder, start, groups, _LANES) as g:
-        for data in (hidden, cells):  # a read, kept in every cache, of data
+        for data in (fractions, cells):  # a read, kept in every cache, of data
             ahead = builder.gep(data, [builder.add(g, g.type(_AHEAD))])
-            builder.call(prefetch, [builder.bitcast(ahead, _BYTES), *map(_INT, (0, 3, 1))])
-        held = builder.fcmp_unordered("!=", _load_vector(builder, hidden, g), nothing)
+            _call(
+                builder,
+                "llvm.prefetch.p0",
+                ir.VoidType(),
+                builder.bitcast(ahead, _BYTES),
+                *map(_INT, (0, 3, 1)),
+            )
+        group = _load(builder, fractions, g, _LANES)
+        held = builder.fcmp_unordered("!=", group, ir.Constant(_FLOATS, [0.0] * _LANES))
         any_held = builder.icmp_unsigned(
             "!=", builder.bitcast(held, ir.IntType(_LANES)), ir.IntType(_LANES)(0)
         )
         with builder.if_then(any_held, likely=True):
-            for e in range(0, _LANES, 4):
-                for half, total in enumerate(sums):
-                    at = builder.add(g, g.type(e + 2 * half))
-                    add(total, builder.fadd(gain(at), gain(builder.add(at, at.type(1)))))
+            group_units = _units(builder, group)
+            add(room.whole, group_units)
+            builder.store(group_units, room.units)
+            # The cells four at a time, split by shifts: loads are the kernel's bound.
+            quads = builder.bitcast(builder.gep(cells, [g]), _WIDE.as_pointer())
+            for e in range(_LANES):
+                if e % 4 == 0:
+                    quad = builder.load(builder.gep(quads, [_WIDE(e // 4)]), align=2)
+                shifted = builder.lshr(quad, _WIDE(16 * (e % 4)))
+                cell = builder.and_(shifted, _WIDE(0xFFFF))
+                w = _splat(builder, builder.load(builder.gep(hidden, [_WIDE(e)])), 2 * _LANES)
+                gain(cell, room.sums[e % 2], w)
     with _loop(builder, groups, stop, 1) as e:
-        add(sums[0], gain(e))
-    gained = builder.fadd(builder.load(sums[0]), builder.load(sums[1]))
-    best = builder.extract_element(gained, _INT(0))
+        one = builder.insert_element(
+            ir.Constant(_FLOATS, [0.0] * _LANES), builder.load(builder.gep(fractions, [e])), _INT(0)
+        )
+        one_units = _units(builder, one)
+        add(room.whole, one_units)
+        w = _splat(builder, builder.extract_element(one_units, _INT(0)), 2 * _LANES)
+        gain(builder.zext(builder.load(builder.gep(cells, [e])), _WIDE), room.sums[0], w)
+    return (builder.load(room.sums[0]), builder.load(room.sums[1])), builder.load(room.whole)
+
+
+def _row_score(builder, sums, whole, masses, explained):
+    """The row's score from its sums: the least over the shares of ``(1 - E / F) + (P + W -
+    2 C) / UNIT``, in float64 and in `cfsig.cells.cell_scores`' order of operations."""
+    wide = ir.VectorType(_INT, 2 * _LANES)
+    both = builder.add(builder.zext(sums[0], wide), builder.zext(sums[1], wide))
+    first, second = list(range(_LANES)), list(range(_LANES, 2 * _LANES))
+    explained_sums = builder.shuffle_vector(
+        both, both, ir.Constant(ir.VectorType(_INT, _LANES), first)
+    )
+    common = builder.shuffle_vector(both, both, ir.Constant(ir.VectorType(_INT, _LANES), second))
+    lanes = ir.VectorType(_INT, _LANES)
+    w = _call(builder, "llvm.vector.reduce.add.v16i32", _INT, builder.zext(whole, lanes))
+    lost = builder.sub(
+        builder.add(masses, _splat(builder, w, _LANES)),
+        builder.shl(common, ir.Constant(lanes, [1] * _LANES)),
+    )
+    reals = ir.VectorType(_DOUBLE, _LANES)
+    one = ir.Constant(reals, [1.0] * _LANES)
+    unit = ir.Constant(reals, [1 / UNIT] * _LANES)
+    unexplained = builder.fsub(one, builder.fmul(builder.uitofp(explained_sums, reals), explained))
+    scores = builder.fadd(unexplained, builder.fmul(builder.sitofp(lost, reals), unit))
+    best = builder.extract_element(scores, _INT(0))
     for j in range(1, _LANES):
-        lane = builder.extract_element(gained, _INT(j))
-        best = builder.select(builder.fcmp_ordered(">", lane, best), lane, best)
+        lane = builder.extract_element(scores, _INT(j))
+        best = builder.select(builder.fcmp_ordered("<", lane, best), lane, best)
     return best
