@@ -267,7 +267,7 @@ def part_scorer(
         As `cell_scores`.
     rows : int
         Rows the search will score: from `FAST_MIN_ROWS`, the compiled kernel if llvmlite is
-        installed (`cfsig.cells_llvm.part_scorer`, 8 to 100 times as fast), else
+        installed (`cfsig.cells_llvm.part_scorer`, 8 to 125 times as fast), else
         `cell_scores`.
 
     Returns
