@@ -273,19 +273,14 @@ def _row_sums(builder, room, rows, table, cells, fractions, row, width):
 def _row_score(builder, sums, whole, masses, explained):
     """The row's score from its sums: the least over the shares of ``(1 - E / F) + (P + W -
     2 C) / UNIT``, in float64 and in `cfsig.cells.cell_scores`' order of operations."""
-    wide = ir.VectorType(_INT, 2 * _LANES)
+    lanes, wide = ir.VectorType(_INT, _LANES), ir.VectorType(_INT, 2 * _LANES)
     both = builder.add(builder.zext(sums[0], wide), builder.zext(sums[1], wide))
-    first, second = list(range(_LANES)), list(range(_LANES, 2 * _LANES))
-    explained_sums = builder.shuffle_vector(
-        both, both, ir.Constant(ir.VectorType(_INT, _LANES), first)
+    explained_sums, common = (
+        builder.shuffle_vector(both, both, ir.Constant(lanes, list(range(at, at + _LANES))))
+        for at in (0, _LANES)
     )
-    common = builder.shuffle_vector(both, both, ir.Constant(ir.VectorType(_INT, _LANES), second))
-    lanes = ir.VectorType(_INT, _LANES)
     w = _call(builder, "llvm.vector.reduce.add.v16i32", _INT, builder.zext(whole, lanes))
-    lost = builder.sub(
-        builder.add(masses, _splat(builder, w, _LANES)),
-        builder.shl(common, ir.Constant(lanes, [1] * _LANES)),
-    )
+    lost = builder.sub(builder.add(masses, _splat(builder, w, _LANES)), builder.add(common, common))
     reals = ir.VectorType(_DOUBLE, _LANES)
     one = ir.Constant(reals, [1.0] * _LANES)
     unit = ir.Constant(reals, [1 / UNIT] * _LANES)
