@@ -267,8 +267,8 @@ def part_scorer(
         As `cell_scores`.
     rows : int
         Rows the search will score: from `FAST_MIN_ROWS`, the compiled kernel if llvmlite is
-        installed (`cfsig.cells_llvm.part_scorer`, 8 to 125 times as fast), else
-        `cell_scores`.
+        installed and the system lets it run code it compiles (`cfsig.cells_llvm.part_scorer`,
+        8 to 125 times as fast), else `cell_scores`: the same scores.
 
     Returns
     -------
@@ -279,9 +279,11 @@ def part_scorer(
     if rows >= FAST_MIN_ROWS:
         try:
             fast = importlib.import_module("cfsig.cells_llvm")
+            scorer: Scorer = fast.part_scorer(part, shares)
         except ImportError:  # llvmlite is not installed
             pass
+        except OSError:  # no executable memory (SELinux and the like): llvmlite's own check
+            pass
         else:
-            scorer: Scorer = fast.part_scorer(part, shares)
             return scorer
     return functools.partial(cell_scores, part, shares)

@@ -105,7 +105,9 @@ def _aligned(array: np.ndarray) -> np.ndarray:
 @functools.cache
 def _kernel(cpu: str | None = None) -> _Kernel:
     """The kernel compiled for this CPU (or for the one LLVM names ``cpu``), once a process;
-    the engine that holds its code lives as long as the function does."""
+    the engine that holds its code lives as long as the function does. Raises OSError where the
+    system forbids running code compiled in memory, which would otherwise crash the process."""
+    llvm.check_jit_execution()
     llvm.initialize_native_target()
     llvm.initialize_native_asmprinter()
     features = llvm.get_host_cpu_features().flatten() if cpu is None else ""

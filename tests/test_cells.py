@@ -167,7 +167,7 @@ def test_compiled_scores_take_16_shares_at_most():
         cells_llvm.part_scorer(part, (1.0,) * 17)
 
 
-@pytest.mark.parametrize("case", ["small search", "not installed"])
+@pytest.mark.parametrize("case", ["small search", "not installed", "no executable memory"])
 def test_numpy_scores_without_llvmlite(monkeypatch, case):
     part = [(np.array([1, 2]), np.array([0.5, 0.5]))]
     rows = FAST_MIN_ROWS - 1 if case == "small search" else FAST_MIN_ROWS
@@ -177,6 +177,14 @@ def test_numpy_scores_without_llvmlite(monkeypatch, case):
             raise ImportError(f"{name}: no module named llvmlite")
 
         monkeypatch.setattr("cfsig.cells.importlib.import_module", fail)
+    if case == "no executable memory":
+        cells_llvm = pytest.importorskip("cfsig.cells_llvm", reason="the extra cfsig[fast]")
+
+        def forbidden():
+            raise OSError(13, "cannot allocate executable memory")
+
+        monkeypatch.setattr(cells_llvm.llvm, "check_jit_execution", forbidden)
+        monkeypatch.setattr(cells_llvm, "_kernel", functools.cache(cells_llvm._kernel.__wrapped__))
     scorer = part_scorer(part, (1.0,), rows)
     cells, fractions = np.array([[1, 2]], np.uint16), np.array([[0.5, 0.5]], np.float32)
     assert isinstance(scorer, functools.partial) and scorer.func is cell_scores
