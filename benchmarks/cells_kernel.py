@@ -60,7 +60,8 @@ def load_kernel(rev: str | None, folder: Path):
         sys.exit(f"{rev or 'this checkout'}: no cfsig/cells_llvm.py nor cells_numba.py")
     path = folder / f"{name}.py"
     path.write_text(source)
-    # A module of the package cfsig, so that its relative imports resolve.
+    # A module of the package cfsig, so that its relative imports resolve: to this checkout's
+    # modules (`cfsig.cells.part_table` since commit 1270ec4), whatever REV is.
     spec = importlib.util.spec_from_file_location(f"cfsig.{name}", path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
