@@ -280,9 +280,7 @@ def part_scorer(
         try:
             fast = importlib.import_module("cfsig.cells_llvm")
             scorer: Scorer = fast.part_scorer(part, shares)
-        except ImportError:  # llvmlite is not installed
-            pass
-        except OSError:  # no executable memory (SELinux and the like): llvmlite's own check
+        except (ImportError, OSError):  # no llvmlite, or no executable memory (SELinux)
             pass
         else:
             return scorer
