@@ -49,6 +49,7 @@ os.environ.update(
 import collections
 import pickle
 import statistics
+import subprocess
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -385,7 +386,9 @@ def scale(rows: int, real: str, folder: Path, fill: str = "full", processes: int
     each in processes of its own, whatever `cfsig.cells.part_scorer` would choose for so many
     rows: with the compiled kernel (in ``processes`` processes one after another: the first after
     the files are read back meets pages read only once); with NumPy's (the synthetic query
-    alone); and scoring nothing, what reading the cells costs.
+    alone); and scoring nothing, what reading the cells costs. Last, what a user waits for at
+    the shell: ``cfsig query INDEX PART.off --partial`` of each real part's mesh, a fresh
+    interpreter each time (`_time_shell`).
     """
     sys.path.insert(0, str(ROOT))
     from benchmarks.index_scale import build, real_rows, synthetic_query
@@ -428,6 +431,12 @@ def scale(rows: int, real: str, folder: Path, fill: str = "full", processes: int
                 f"{len(each)} parts' medians of 3; {min(each):.3f} to {max(each):.3f})."
             )
     if cells is not None:
+        each, first = _time_shell(path, sorted(parts.with_suffix("").glob("*.off")))
+        lines.append(
+            f"- the shell, `cfsig query INDEX PART.off --partial`, real parts: **"
+            f"{statistics.median(each):.3f} s** (median of the {len(each)} parts' medians of 3; "
+            f"{min(each):.3f} to {max(each):.3f}); the first command {first:.3f} s."
+        )
         synthetic = synthetic_query(cells)
         distinct = [d for _, d in named]
         lines += [
@@ -462,8 +471,9 @@ def _read_back(index: Path) -> float:
 def real_parts(real: str, path: Path, count: int = 5) -> list[tuple[str, int]]:
     """Parts of ``count`` meshes of the index ``real`` as the benchmark makes them, a cut and a
     body with holes of each (rows spread over the index, seeded by their row), measured with
-    its parameters; pickled to ``path`` for `_time_partial`. Returns each one's name and the
-    distinct cells of its histograms at all shares."""
+    its parameters; pickled to ``path`` for `_time_partial`, their meshes written as OFF files
+    to the folder ``path`` without its suffix for `_time_shell`. Returns each one's name and
+    the distinct cells of its histograms at all shares."""
     from cfsig.index import IndexReader
 
     with IndexReader(real) as reader:
@@ -471,17 +481,36 @@ def real_parts(real: str, path: Path, count: int = 5) -> list[tuple[str, int]]:
         rows = np.linspace(0, n - 1, count).astype(int)
         entries = reader.entries(rows)
     parts, named = [], []
+    folder = path.with_suffix("")
+    folder.mkdir(exist_ok=True)
     for row, entry in zip(rows, entries, strict=True):
         mesh = read_mesh(entry.path)
         rng = np.random.default_rng(int(row))
         for kind, make in (("cut", cut), ("holes", holes)):
-            part = measure_part(make(mesh, rng), params)
+            made = make(mesh, rng)
+            messy.write_off(folder / f"{len(parts):02d}.off", (made.vertices, made.faces))
+            part = measure_part(made, params)
             assert part.cells is not None  # version 10
             parts.append(part)
             distinct = np.unique(np.concatenate([c for c, _ in part.cells]))
             named.append((f"{entry.name} {kind}", len(distinct)))
     path.write_bytes(pickle.dumps(parts))
     return named
+
+
+def _time_shell(index: Path, meshes: list[Path]) -> tuple[list[float], float]:
+    """Wall seconds of ``cfsig query INDEX MESH --partial``, each run in a fresh interpreter,
+    three times a mesh in turn: each mesh's median, and the first command's time."""
+    from benchmarks.index_scale import K
+
+    runs: list[list[float]] = [[] for _ in meshes]
+    for _ in range(3):
+        for times, mesh in zip(runs, meshes, strict=True):
+            command = [sys.executable, "-m", "cfsig", "query", str(index), str(mesh)]
+            start = time.perf_counter()
+            subprocess.run([*command, "--partial", "-k", str(K)], check=True, capture_output=True)
+            times.append(time.perf_counter() - start)
+    return [statistics.median(times) for times in runs], runs[0][0]
 
 
 def _time_partial(real: str, path: Path, kernel: str, parts: Path | None) -> dict:
