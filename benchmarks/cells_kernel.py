@@ -2,11 +2,11 @@
 
     python benchmarks/cells_kernel.py --against REV --real INDEX --dir DIR
 
-The host's speed drifts by a tenth or more between runs, so a change to `cfsig.cells_llvm` is
+The host's speed drifts by a tenth or more between runs, so a change to `cfsig.search.cells_llvm` is
 judged here by a ratio in one process: the kernel's module as it was at commit REV (read with
 ``git show``: ``cfsig/cells_llvm.py``, or numba's ``cells_numba.py`` before it) and as it is
 now, loaded side by side, take turns at the same
-``cfsig query --partial`` searches (`cfsig.parts.partial_search`), round after round, over the
+``cfsig query --partial`` searches (`cfsig.search.partial.query_part`), round after round, over the
 synthetic index of ``benchmarks/partial.py --scale`` in DIR (``partial-fine-ROWS``, built from
 INDEX, an index of SHREC 2007 of version 10: run that first). The queries are those of
 ``partial.py --scale``: the synthetic query, then its real parts (`partial.real_parts`). Each
@@ -61,7 +61,7 @@ def load_kernel(rev: str | None, folder: Path):
     path = folder / f"{name}.py"
     path.write_text(source)
     # A module of the package cfsig, so that its relative imports resolve: to this checkout's
-    # modules (`cfsig.cells.part_table` since commit 1270ec4), whatever REV is.
+    # modules (`cfsig.descriptors.cells.part_table` since commit 1270ec4), whatever REV is.
     spec = importlib.util.spec_from_file_location(f"cfsig.{name}", path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
@@ -82,12 +82,12 @@ def main() -> None:
     if args.against is None and not args.bounds:
         parser.error("--against REV, or --bounds")
 
-    import cfsig.cells
-    import cfsig.cells_llvm
+    import cfsig.descriptors.cells
+    import cfsig.search.cells_llvm
     from benchmarks.index_scale import synthetic_query
     from benchmarks.partial import real_parts
-    from cfsig.index import IndexReader
-    from cfsig.parts import Part, partial_search
+    from cfsig.index.store import IndexReader
+    from cfsig.search.partial import Part, query_part
 
     index = args.dir / f"partial-fine-{args.rows}"
     if not (index / "manifest.h5").exists():
@@ -113,13 +113,13 @@ def main() -> None:
         }
         times = {(k, i): [] for k in kernels for i, _ in enumerate(queries)}
 
-        cfsig.cells.FAST_MIN_ROWS = 0  # the compiled kernel at any size
+        cfsig.descriptors.cells.FAST_MIN_ROWS = 0  # the compiled kernel at any size
 
         def search(kernel, part) -> float:
-            cfsig.cells_llvm.part_scorer = kernel.part_scorer
+            cfsig.search.cells_llvm.part_scorer = kernel.part_scorer
             start = time.perf_counter()
             with IndexReader(index) as reader:
-                partial_search(reader, part, 20)
+                query_part(reader, part, 20)
             return time.perf_counter() - start
 
         for round_ in range(args.rounds + 1):
@@ -151,7 +151,7 @@ def bounds(real, queries, index: Path, rounds: int) -> None:
     import numpy as np
 
     from benchmarks.index_scale import synthetic_cells
-    from cfsig.parts import FINE_SHARES
+    from cfsig.search.partial import FINE_SHARES
 
     threads, rows = len(os.sched_getaffinity(0)), 150
     held = synthetic_cells(np.random.default_rng(1), threads * rows, real)
@@ -176,9 +176,9 @@ def bounds(real, queries, index: Path, rounds: int) -> None:
 def _in_cache(part, blocks, repeats: int = 1000) -> float:
     """Seconds a slot of the kernel for ``part``, one thread per block, each scoring its block
     ``repeats`` times: the median over the threads."""
-    from cfsig import cells_llvm
-    from cfsig.nearest import parallel
-    from cfsig.parts import FINE_SHARES
+    from cfsig.search import cells_llvm
+    from cfsig.search.nearest import parallel
+    from cfsig.search.partial import FINE_SHARES
 
     score = cells_llvm.part_scorer(part, FINE_SHARES)
     took: list[float] = []
@@ -197,9 +197,9 @@ def _in_cache(part, blocks, repeats: int = 1000) -> float:
 def _from_index(part, index: Path) -> float:
     """Seconds a slot spent in the kernel during ``cfsig query --partial``'s search of
     ``index``: the median over the threads."""
-    from cfsig import cells_llvm
-    from cfsig.index import IndexReader
-    from cfsig.parts import Part, partial_search
+    from cfsig.index.store import IndexReader
+    from cfsig.search import cells_llvm
+    from cfsig.search.partial import Part, query_part
 
     spent: dict[int, list[float]] = {}
     made = cells_llvm.part_scorer
@@ -220,7 +220,7 @@ def _from_index(part, index: Path) -> float:
     cells_llvm.part_scorer = timed
     try:
         with IndexReader(index) as reader:
-            partial_search(reader, Part(cells=part), 20)
+            query_part(reader, Part(cells=part), 20)
     finally:
         cells_llvm.part_scorer = made
     return statistics.median(seconds / slots for seconds, slots in spent.values())

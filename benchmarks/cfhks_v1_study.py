@@ -33,14 +33,14 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cfsig import cfhks  # noqa: E402
-from cfsig.conformal import conformal_factor  # noqa: E402
-from cfsig.measures import evaluate_distances  # noqa: E402
-from cfsig.mesh import read_mesh  # noqa: E402
-from cfsig.nearest import l1_distances  # noqa: E402
+from cfsig.descriptors import intrinsic as cfhks
+from cfsig.descriptors.signature import sample_phi, signature_file, signature_of  # noqa: E402
+from cfsig.evaluation.measures import evaluate_distances  # noqa: E402
+from cfsig.files.mesh import read_mesh  # noqa: E402
+from cfsig.operators.conformal import conformal_factor  # noqa: E402
+from cfsig.operators.spectrum import heat_kernel_signature, laplace_spectrum  # noqa: E402
 from cfsig.params import Params  # noqa: E402
-from cfsig.signature import sample_phi, signature_file, signature_of  # noqa: E402
-from cfsig.spectrum import heat_kernel_signature, laplace_spectrum  # noqa: E402
+from cfsig.search.nearest import l1_distances  # noqa: E402
 
 DATA = ROOT.parent / "shared" / "data" / "shrec07"
 CACHE = Path("/tmp/cfsig-descriptor-channels.npz")

@@ -19,7 +19,7 @@ Stages (each prints Markdown for docs/descriptors.md; run from the repository ro
 ``measure`` computes, for every mesh of the three collections (``--data-root``, where
 ``../shared/data/unpack`` puts them), eleven descriptors from the file, each timed in CPU seconds
 of its worker process with one BLAS thread, reading included: ``cf`` (the paper's), ``cfhks``
-versions 1 to 9 (`cfsig.cfhks.DESIGNS`) and ShapeDNA (lapy, the 50 smallest nonzero
+versions 1 to 9 (`cfsig.descriptors.intrinsic.DESIGNS`) and ShapeDNA (lapy, the 50 smallest nonzero
 eigenvalues times the area divided by their index, compared by L2, as in the issue's table). It
 also keeps the unweighted channels of version 2 (phi, the spectrum, heat at eight times), from
 which ``study`` builds every candidate weighting. Caches go under ``--cache`` (never commit).
@@ -99,17 +99,18 @@ import messy
 import numpy as np
 import scipy.sparse as sp
 
-from cfsig import cfhks, spectrum
-from cfsig.conformal import conformal_factor, factorize, laplacian_solver, operators
-from cfsig.curvature import smoothed_curvature
+from cfsig.descriptors import intrinsic as cfhks
+from cfsig.descriptors.signature import signature_file
 from cfsig.errors import MeshError
-from cfsig.measures import RetrievalReport, evaluate_distances
-from cfsig.mesh import clean_mesh, read_mesh
+from cfsig.evaluation.measures import RetrievalReport, evaluate_distances
+from cfsig.files.mesh import clean_mesh, read_mesh
+from cfsig.operators import spectrum
+from cfsig.operators.conformal import conformal_factor, factorize, laplacian_solver, operators
+from cfsig.operators.curvature import smoothed_curvature
+from cfsig.operators.spectrum import Spectrum, laplace_spectrum
 from cfsig.params import DEFAULT_VERSIONS, Params
-from cfsig.repair import repair_mesh
-from cfsig.signature import signature_file
-from cfsig.simplify import simplified_mesh
-from cfsig.spectrum import Spectrum, laplace_spectrum
+from cfsig.repair.simplify import simplified_mesh
+from cfsig.repair.stage import repair_mesh
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA_ROOT = ROOT.parent / "shared" / "data"
@@ -697,7 +698,7 @@ def study7(args: argparse.Namespace) -> None:
 
 
 def _divisors(scans: Scans, weights: dict[str, float]) -> None:
-    """Print a candidate's divisors as `cfsig.cfhks.DESIGNS` records them."""
+    """Print a candidate's divisors as `cfsig.descriptors.intrinsic.DESIGNS` records them."""
     print("\nDivisors (each channel's median clean distance over the pairs, averaged over")
     print(f"{' and '.join(V3_CHOSEN_ON)}, divided by its weight):")
     for key, weight in weights.items():

@@ -27,7 +27,7 @@ from pathlib import Path
 import common
 import numpy as np
 
-from cfsig.index import IndexReader
+from cfsig.index.store import IndexReader
 
 COMMAND = "import sys; from cfsig.cli import main; sys.exit(main())"
 DESCRIPTOR: list[str] = []  # --descriptor, when given

@@ -49,7 +49,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cfsig.index import Entry, IndexWriter  # noqa: E402
+from cfsig.index.store import Entry, IndexWriter  # noqa: E402
 from cfsig.params import Params, signature_length  # noqa: E402
 
 PARAMS = Params(descriptor="cfhks")
@@ -67,7 +67,7 @@ def real_rows(index: str | None, params: Params = PARAMS) -> np.ndarray | None:
     """The signatures of a real index of ``params``, or None for random rows."""
     if index is None:
         return None
-    from cfsig.index import IndexReader
+    from cfsig.index.store import IndexReader
 
     with IndexReader(index) as reader:
         if reader.params != params:
@@ -78,7 +78,7 @@ def real_rows(index: str | None, params: Params = PARAMS) -> np.ndarray | None:
 def synthetic_cells(
     rng: np.random.Generator, n: int, real: tuple[np.ndarray, np.ndarray], fill: str = "full"
 ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """n rows of fine cells (`cfsig.cells.packed_cells`) from the cells ``real`` of the rows of a
+    """n rows of fine cells (`cfsig.descriptors.cells.packed_cells`) from the cells ``real`` of the rows of a
     real index (`IndexReader.cells`): two real rows' cells, their fractions mixed as
     `synthetic_rows` mixes vectors, the largest kept: as many as fit (``fill="full"``: the two
     rows together nearly always fill every slot), or as many as a third real row, drawn at
@@ -108,9 +108,9 @@ def synthetic_query(
     real: tuple[np.ndarray, np.ndarray],
 ) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
     """The synthetic partial query of version 10: its cells at each of the 13 shares
-    (`cfsig.parts.FINE_SHARES`) are those of one more `synthetic_cells` row, seeded: 13
+    (`cfsig.search.partial.FINE_SHARES`) are those of one more `synthetic_cells` row, seeded: 13
     unrelated histograms, each of mass 1."""
-    from cfsig.parts import FINE_SHARES
+    from cfsig.search.partial import FINE_SHARES
 
     held = synthetic_cells(np.random.default_rng(6), len(FINE_SHARES), real)
     return tuple((c[f > 0].astype(np.int64), f[f > 0] / f.sum()) for c, f in held)
@@ -128,7 +128,7 @@ def synthetic_rows(rng: np.random.Generator, n: int, real: np.ndarray | None) ->
 
 def fake_signature(i: int, rng: np.random.Generator | None = None):
     """A signature of random values for row ``i`` (the Signature class loads scipy: lazily)."""
-    from cfsig.signature import Signature
+    from cfsig.descriptors.signature import Signature
 
     vector = (rng or np.random.default_rng(i)).random(WIDTH, dtype=np.float32)
     return Signature(vector, np.zeros(1), 1, 1, 1, 0.0, (), "clean", 0.0, f"{i:064x}")
@@ -156,7 +156,7 @@ def build(
     the real ``cells`` (and ``fill``) when the parameters keep fine cells, in commits of
     PIECE_ROWS then (a commit holds its rows in memory: 6 KB of cells a row); return the
     seconds taken."""
-    from cfsig.signature import Signature
+    from cfsig.descriptors.signature import Signature
 
     rng = np.random.default_rng(0)
     phi = np.zeros(1)
@@ -245,25 +245,25 @@ def query_times(path: Path, real: str | None, pruned: bool) -> dict:
     """
     code = f"""
 import numpy as np
-import cfsig.nearest
-from cfsig.index import IndexReader
-from cfsig.nearest import search
+import cfsig.search.nearest
+from cfsig.index.store import IndexReader
+from cfsig.search.nearest import query
 from benchmarks.index_scale import real_rows, synthetic_rows
 real = real_rows({real!r})
 query = synthetic_rows(np.random.default_rng(5), 1, real)
 if not {pruned}:
-    cfsig.nearest.PRUNE_MIN_ROWS = 10**15
+    cfsig.search.nearest.PRUNE_MIN_ROWS = 10**15
 exact = []
-real_exact = cfsig.nearest._Pruned._exact
+real_exact = cfsig.search.nearest._Pruned._exact
 def counted(self, j, query, rows, *args):
     exact.append(len(rows))
     return real_exact(self, j, query, rows, *args)
-cfsig.nearest._Pruned._exact = counted
+cfsig.search.nearest._Pruned._exact = counted
 def once():
     exact.clear()
     t = time.perf_counter()
     with IndexReader({str(path)!r}) as r:
-        hits = search(r, query, {K})[0]
+        hits = query(r, query, {K})[0]
     return time.perf_counter() - t, len(r)
 once()
 runs = [once() for _ in range(3)]
@@ -325,8 +325,8 @@ def group_study(real: np.ndarray, rows: int = 1_000_000, queries: int = 5) -> li
     """Sketch group sizes on ``rows`` mixed rows in memory, one thread: for each, the mean
     number of rows whose bound does not exceed the 20th distance (those a search computes
     exactly, at least), and the seconds to scan the sketches with one query (best of 3)."""
-    from cfsig.l1 import choose_kernel
-    from cfsig.sketch import group_sums
+    from cfsig.index.sketch import group_sums
+    from cfsig.search.l1 import choose_kernel
 
     rng = np.random.default_rng(11)
     data = np.concatenate(
@@ -383,7 +383,7 @@ def storage_scan(rows: int = 1_000_000) -> dict[str, float]:
     available from wheels, numpy and faiss, take float32 only); and 8-bit rows summed as bytes
     by `sad_uint8`, without decoding.
     """
-    from cfsig.l1 import choose_kernel
+    from cfsig.search.l1 import choose_kernel
 
     kernel = choose_kernel(rows)
     rng = np.random.default_rng(7)
@@ -432,23 +432,23 @@ def rankings_check(index: str) -> dict:
     """Every row of a real index as a query, its 2(C - 1) + 1 nearest (C its class size) pruned
     (forced, however few the rows) and by the full scan: whether rows and distances are equal,
     NN, FT and ST from each ranking (the query itself left out), and the rows each computed."""
-    import cfsig.nearest
-    from cfsig.index import IndexReader
-    from cfsig.nearest import nearest
+    import cfsig.search.nearest
+    from cfsig.index.store import IndexReader
+    from cfsig.search.nearest import nearest
 
     settings = {"PRUNE_MIN_ROWS": 0, "_SCAN_RATIO": 0, "_FIRST": 1}
-    saved = {key: getattr(cfsig.nearest, key) for key in settings}
+    saved = {key: getattr(cfsig.search.nearest, key) for key in settings}
     with IndexReader(index) as reader:
         labels = np.array(reader.column("labels"))
         sizes = {c: int((labels == c).sum()) for c in set(labels)}
         k = 2 * (max(sizes.values()) - 1) + 1
         queries = reader.signatures[:]
         full = nearest(reader, queries, k)
-        vars(cfsig.nearest).update(settings)
+        vars(cfsig.search.nearest).update(settings)
         try:
             pruned = nearest(reader, queries, k)
         finally:
-            vars(cfsig.nearest).update(saved)
+            vars(cfsig.search.nearest).update(saved)
     out: dict = {"identical": bool(np.array_equal(full[0], pruned[0]))}
     out["identical"] &= bool(np.array_equal(full[1], pruned[1]))
     for route, (rows, _) in (("full", full), ("pruned", pruned)):
@@ -541,7 +541,7 @@ def main() -> None:
             if not args.keep:
                 shutil.rmtree(path, ignore_errors=True)
     if args.writer_index is not None:
-        from cfsig.index import IndexReader
+        from cfsig.index.store import IndexReader
 
         with IndexReader(args.writer_index) as reader:
             rows = len(reader)

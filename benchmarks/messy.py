@@ -24,7 +24,7 @@ Kinds (`KINDS`; each copy is seeded by its file's name and the kind, so reruns a
 Three more kinds (`SCAN_KINDS`, only when ``--kinds`` names them) are not mess for the repair
 stage to undo but the ways a scan of a shape differs from its model:
 
-- ``remesh``: simplified to half its faces by quadric edge collapses (`cfsig.simplify.decimate`),
+- ``remesh``: simplified to half its faces by quadric edge collapses (`cfsig.repair.simplify.decimate`),
   so that no vertex or triangle is the model's.
 - ``light-noise``, ``noise``: every vertex moved by Gaussian noise whose standard deviation per
   coordinate is 3% or 10% of the mesh's mean edge length.
@@ -52,12 +52,12 @@ import common
 import igl
 import numpy as np
 
-from cfsig import cfhks
 from cfsig.batch import compute_many
-from cfsig.evaluate import evaluate_distances
-from cfsig.nearest import l1_distances
+from cfsig.descriptors import intrinsic as cfhks
+from cfsig.evaluation.collections import evaluate_distances
 from cfsig.params import DESCRIPTORS, REPAIR_MODES, Params
-from cfsig.simplify import decimate
+from cfsig.repair.simplify import decimate
+from cfsig.search.nearest import l1_distances
 
 Mesh = tuple[np.ndarray, np.ndarray]  # vertices (n, 3) float64, faces (m, 3) int64
 SUFFIXES = (".off", ".obj", ".ply", ".stl")

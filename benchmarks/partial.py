@@ -21,11 +21,11 @@ the script makes two parts, seeded by the mesh's position so that every run make
   triangles), then every vertex moved by Gaussian noise of a tenth of the mean edge length.
 
 Each part is a query against the collection's whole shapes, the part's own whole among them,
-relevant the wholes of its class (`cfsig.measures.evaluate_queries`), ranked three ways: as a
+relevant the wholes of its class (`cfsig.evaluation.measures.evaluate_queries`), ranked three ways: as a
 whole shape (its default ``cfhks`` signature, what ``cfsig query`` does), by the partial distance of
-the curvature channel alone (`cfsig.parts.partial_distances`), and as ``cfsig query --partial``
-ranks (`cfsig.parts.expanded_distances`); the last two also on an index of version 10, the
-part measured at 13 shares and ranked by its fine curvature cells (`cfsig.parts.measure_part`,
+the curvature channel alone (`cfsig.search.partial.partial_distances`), and as ``cfsig query --partial``
+ranks (`cfsig.search.partial.expanded_distances`); the last two also on an index of version 10, the
+part measured at 13 shares and ranked by its fine curvature cells (`cfsig.search.partial.measure_part`,
 the wholes' cells from their version 10 signatures, whose vectors are the default's); and by
 the partial distance for each weight of
 `WEIGHTS`, which is how its weight was chosen (on SHREC 2007). It also lists SHREC 2007's
@@ -62,13 +62,14 @@ from common import report_measured, study_parser
 from descriptors import collection_paths, shapedna
 from scipy.sparse.csgraph import connected_components, dijkstra
 
-from cfsig import cfhks
-from cfsig.geometry import mesh_edges
-from cfsig.measures import evaluate_distances, evaluate_queries
-from cfsig.mesh import Mesh, clean_mesh, read_mesh
-from cfsig.nearest import l1_distances
+from cfsig.descriptors import intrinsic as cfhks
+from cfsig.descriptors.signature import compute_signature
+from cfsig.evaluation.measures import evaluate_distances, evaluate_queries
+from cfsig.files.elements import mesh_edges
+from cfsig.files.mesh import Mesh, clean_mesh, read_mesh
 from cfsig.params import VERSIONS, Params
-from cfsig.parts import (
+from cfsig.search.nearest import l1_distances
+from cfsig.search.partial import (
     HISTOGRAM_WEIGHT,
     SHARES,
     Part,
@@ -79,7 +80,6 @@ from cfsig.parts import (
     partial_vectors,
     share_queries,
 )
-from cfsig.signature import compute_signature
 
 ROOT = Path(__file__).resolve().parents[1]
 COLLECTIONS = ("shrec07", "mcgill", "faust")
@@ -381,9 +381,9 @@ def scale(rows: int, real: str, folder: Path, fill: str = "full", processes: int
     with ``"real"`` as many as the real index's rows do), the query's cells at the 13 shares are
     13 more such rows' with every slot filled (the synthetic query), and then the real parts of
     `real_parts`. Open,
-    `cfsig.parts.partial_search` for 20 results and their names: the first query of the
+    `cfsig.search.partial.query_part` for 20 results and their names: the first query of the
     process (imports and compiled code loaded), then three more of each query. For version 10,
-    each in processes of its own, whatever `cfsig.cells.part_scorer` would choose for so many
+    each in processes of its own, whatever `cfsig.descriptors.cells.part_scorer` would choose for so many
     rows: with the compiled kernel (in ``processes`` processes one after another: the first after
     the files are read back meets pages read only once); with NumPy's (the synthetic query
     alone); and scoring nothing, what reading the cells costs. Last, what a user waits for at
@@ -392,7 +392,7 @@ def scale(rows: int, real: str, folder: Path, fill: str = "full", processes: int
     """
     sys.path.insert(0, str(ROOT))
     from benchmarks.index_scale import build, real_rows, synthetic_query
-    from cfsig.index import IndexReader
+    from cfsig.index.store import IndexReader
 
     with IndexReader(real) as reader:
         params, cells = reader.params, reader.cells()
@@ -474,7 +474,7 @@ def real_parts(real: str, path: Path, count: int = 5) -> list[tuple[str, int]]:
     its parameters; pickled to ``path`` for `_time_partial`, their meshes written as OFF files
     to the folder ``path`` without its suffix for `_time_shell`. Returns each one's name and
     the distinct cells of its histograms at all shares."""
-    from cfsig.index import IndexReader
+    from cfsig.index.store import IndexReader
 
     with IndexReader(real) as reader:
         params, n = reader.params, len(reader)
@@ -520,15 +520,15 @@ def _time_partial(real: str, path: Path, kernel: str, parts: Path | None) -> dic
     from benchmarks.index_scale import K, in_child
 
     force = {
-        "compiled": "cfsig.cells.FAST_MIN_ROWS = 0",
-        "NumPy": "cfsig.cells.FAST_MIN_ROWS = 1 << 62",
-        "reading alone": "cfsig.parts.part_scorer = lambda *_: lambda c, f: np.zeros(len(c))",
+        "compiled": "cfsig.descriptors.cells.FAST_MIN_ROWS = 0",
+        "NumPy": "cfsig.descriptors.cells.FAST_MIN_ROWS = 1 << 62",
+        "reading alone": "cfsig.search.partial.part_scorer = lambda *_: lambda c, f: np.zeros(len(c))",
     }.get(kernel, "")
     code = f"""
 import numpy as np
-import cfsig.cells, cfsig.parts
-from cfsig.index import IndexReader
-from cfsig.parts import SHARES, Part, curvature_columns, partial_search
+import cfsig.descriptors.cells, cfsig.search.partial
+from cfsig.index.store import IndexReader
+from cfsig.search.partial import SHARES, Part, curvature_columns, query_part
 from benchmarks.index_scale import real_rows, synthetic_query, synthetic_rows
 {force}
 with IndexReader({real!r}) as reader:
@@ -541,7 +541,7 @@ else:
 def once(part):
     t = time.perf_counter()
     with IndexReader({str(path)!r}) as r:
-        hits, _ = partial_search(r, part, {K})
+        hits, _ = query_part(r, part, {K})
     return time.perf_counter() - t
 out = {{'first': once(part), 'times': [once(part) for _ in range(3)], 'real': []}}
 if {str(parts) if parts else ""!r}:

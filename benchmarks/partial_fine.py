@@ -3,18 +3,18 @@
     python benchmarks/partial_fine.py --data-root /work/data --doc docs/partial.md
 
 A study, not what ``cfsig query --partial`` computes. Version 9's curvature channel
-(`cfsig.cfhks`) holds the joint histograms of each pair of adjacent scales, 17 bins per axis:
+(`cfsig.descriptors.intrinsic`) holds the joint histograms of each pair of adjacent scales, 17 bins per axis:
 it forgets where a vertex lies at scales two apart, and a bin is a twelfth of the curvature's
 axis wide. This asks what a part gains when the whole's histogram keeps all four scales at once
 (one cell per vertex's first bin and its three steps to the next scale, each clipped to within
 D bins: B x (2 D + 1)^3 cells), on B bins per axis, B up to 41; and whether such a histogram
-needs a finer grid of shares than `cfsig.parts.SHARES` (7, a factor sqrt(2) apart in area): 13,
+needs a finer grid of shares than `cfsig.search.partial.SHARES` (7, a factor sqrt(2) apart in area): 13,
 a factor 2^(1/4) apart, of which the 7 are every other one.
 
 It makes the parts of ``benchmarks/partial.py`` (the same cuts, bodies with holes and scans,
 from the same seeds) of every mesh of SHREC 2007, McGill and FAUST, measures the curvature of
-the wholes and of the parts at each share as version 9 does (`cfsig.parts.share_curvatures`),
-and ranks the wholes for each part by the partial distance (`cfsig.parts.partial_scores`:
+the wholes and of the parts at each share as version 9 does (`cfsig.search.partial.share_curvatures`),
+and ranks the wholes for each part by the partial distance (`cfsig.search.partial.partial_scores`:
 unexplained share plus L1 distance, weight 1, at the best share) of each feature. Such a
 histogram has far more cells than a whole has vertices (about 2,000 on its copy), so it is
 stored sparse: the partial distance needs only, per share ``f``, ``sum(min(f p, w))`` and
@@ -55,14 +55,14 @@ import numpy as np
 from descriptors import collection_paths
 from partial import COLLECTIONS, KINDS, cut, holes, scan
 
-from cfsig.cells import cell_histogram
-from cfsig.measures import evaluate_queries
-from cfsig.mesh import read_mesh
-from cfsig.nearest import l1_distances
+from cfsig.descriptors.cells import cell_histogram
+from cfsig.descriptors.signature import compute_signature
+from cfsig.evaluation.measures import evaluate_queries
+from cfsig.files.mesh import read_mesh
 from cfsig.params import Params
-from cfsig.parts import FINE_SHARES, SHARES, share_curvatures
-from cfsig.repair import repair_mesh
-from cfsig.signature import compute_signature
+from cfsig.repair.stage import repair_mesh
+from cfsig.search.nearest import l1_distances
+from cfsig.search.partial import FINE_SHARES, SHARES, share_curvatures
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = Params(descriptor="cfhks", version=9)
@@ -86,7 +86,7 @@ TITLE = "## Four scales jointly, on finer bins: a study"
 
 
 def histogram(values: np.ndarray, areas: np.ndarray, feature: tuple) -> tuple:
-    """A surface's sparse histogram of one feature (`cfsig.cells.cell_histogram`)."""
+    """A surface's sparse histogram of one feature (`cfsig.descriptors.cells.cell_histogram`)."""
     _, bins, band, joint, _ = feature
     return cell_histogram(values, areas, bins, band, joint)
 
@@ -124,7 +124,7 @@ def _scores(
     parts: list[list[tuple]], occupied: np.ndarray, dense: np.ndarray, shares: tuple
 ) -> np.ndarray:
     """Partial distances (parts, wholes): ``min_f (1 - sum(min(f p, w)) / f) + (2 - 2
-    sum(min(p, w)))``, `cfsig.parts.partial_scores` for histograms of mass 1, from the wholes'
+    sum(min(p, w)))``, `cfsig.search.partial.partial_scores` for histograms of mass 1, from the wholes'
     histograms laid out densely (`_dense`)."""
     out = np.empty((len(parts), len(dense)))
     for i, part in enumerate(parts):

@@ -4,9 +4,9 @@
 
 Makes the parts of ``benchmarks/partial.py`` (the same cuts, bodies with holes and scans, from
 the same seeds) of every mesh of SHREC 2007, McGill and FAUST, and ranks the whole shapes for
-each part by the partial distance (`cfsig.parts.partial_scores`: unexplained share plus L1
+each part by the partial distance (`cfsig.search.partial.partial_scores`: unexplained share plus L1
 distance, at the best share) of features of the curvature at version 8's four scales,
-measured on the same surfaces (`cfsig.parts.share_curvatures`):
+measured on the same surfaces (`cfsig.search.partial.share_curvatures`):
 
 - ``marginal``: its histograms per scale, version 8's curvature channel;
 - ``joint B``: the histograms of each pair of adjacent scales jointly, on B x B bins of the same
@@ -26,7 +26,7 @@ with their curvature columns replaced by the feature, weighed by version 7's rul
 distance over the pairs, averaged over SHREC 2007 and FAUST, is its unit, as version 8's
 marginals' is), every mesh a query against the rest of its collection.
 
-Version 9's channel (`cfsig.cfhks`) is chosen by version 8's rule: of the bands with an odd B
+Version 9's channel (`cfsig.descriptors.intrinsic`) is chosen by version 8's rule: of the bands with an odd B
 (zero curvature mid-bin, version 5's reason) that meet issue 14's bars as the whole-shape
 channel on version 8's training collections (SHREC 2007 and FAUST), the one of fewest columns
 (the cost of a partial query's scan) within 0.01 of the best mean NN over SHREC 2007's parts.
@@ -49,14 +49,25 @@ import numpy as np
 from descriptors import collection_paths
 from partial import COLLECTIONS, KINDS, cut, holes, scan
 
-from cfsig.cfhks import DESIGNS, curvature_histograms, curvature_shape, weigh_curvature
-from cfsig.measures import evaluate_distances, evaluate_queries
-from cfsig.mesh import read_mesh
-from cfsig.nearest import l1_distances
+from cfsig.descriptors.intrinsic import (
+    DESIGNS,
+    curvature_histograms,
+    curvature_shape,
+    weigh_curvature,
+)
+from cfsig.descriptors.signature import compute_signature
+from cfsig.evaluation.measures import evaluate_distances, evaluate_queries
+from cfsig.files.mesh import read_mesh
 from cfsig.params import Params
-from cfsig.parts import SHARES, curvature_columns, partial_scores, share_curvatures, share_queries
-from cfsig.repair import repair_mesh
-from cfsig.signature import compute_signature
+from cfsig.repair.stage import repair_mesh
+from cfsig.search.nearest import l1_distances
+from cfsig.search.partial import (
+    SHARES,
+    curvature_columns,
+    partial_scores,
+    share_curvatures,
+    share_queries,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 # Version 8, whose curvature channel (the marginals) version 9 replaces by what this chose.

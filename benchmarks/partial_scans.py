@@ -12,8 +12,8 @@ and 10% of the mean edge length, the same draws scaled), both (a scan), and the 
 for what smoothing costs a part without noise, the cut smoothed once. Each is a partial query
 against the whole collection, its own whole among it, on an index of the default ``cfhks``
 (version 9: the part's curvature channel) and of version 10 (its fine cells), each measured by
-`cfsig.parts.measure_part`: NN and own whole first by the partial distance, FT as
-``cfsig query --partial`` ranks (`cfsig.parts.expanded_distances`).
+`cfsig.search.partial.measure_part`: NN and own whole first by the partial distance, FT as
+``cfsig query --partial`` ranks (`cfsig.search.partial.expanded_distances`).
 """
 
 from __future__ import annotations
@@ -35,11 +35,11 @@ from common import report_measured, study_parser
 from descriptors import collection_paths
 from partial import COLLECTIONS, DEFAULT, FINE, cut
 
-from cfsig.geometry import mesh_edges
-from cfsig.measures import evaluate_queries
-from cfsig.mesh import Mesh, clean_mesh, read_mesh
-from cfsig.parts import expanded_distances, measure_part, partial_distances
-from cfsig.signature import compute_signature
+from cfsig.descriptors.signature import compute_signature
+from cfsig.evaluation.measures import evaluate_queries
+from cfsig.files.elements import mesh_edges
+from cfsig.files.mesh import Mesh, clean_mesh, read_mesh
+from cfsig.search.partial import expanded_distances, measure_part, partial_distances
 
 SMOOTHING = (1, 2, 5)  # Taubin iterations tried on the scans
 MARKER = "<!-- measured: what follows is written by benchmarks/partial_scans.py -->"

@@ -3,7 +3,7 @@
     python benchmarks/partial_stage.py --data-root /work/data --doc docs/partial.md
 
 A study, not what ``cfsig query --partial`` computes. Version 10 ranks the wholes for a part by
-`cfsig.cells.cell_scores`, which reads every stored cell of every row: 106.7 s over 1M rows
+`cfsig.descriptors.cells.cell_scores`, which reads every stored cell of every row: 106.7 s over 1M rows
 (partial.md, "Scale"). A search within 1 s would score every row by something far cheaper, keep
 the first few, and rescore only those by the cells. This measures, for the parts of
 ``benchmarks/partial.py`` (the same cuts and bodies with holes, from the same seeds) of every
@@ -12,7 +12,7 @@ nearest whole: the share of the parts for which it lies among the candidate's fi
 20% of the collection (what a second stage given that many rows would still find), its median
 and largest rank, and the candidate's own NN.
 
-The candidates are similarities to be maximised over the 13 shares of `cfsig.parts.FINE_SHARES`,
+The candidates are similarities to be maximised over the 13 shares of `cfsig.search.partial.FINE_SHARES`,
 each an inner product, so that a dense one is a matrix product over the rows (BLAS):
 
 - ``Bhattacharyya``: ``sum(sqrt(p w))`` over the cells, the part's histogram ``p`` at a share and
@@ -45,17 +45,19 @@ from descriptors import collection_paths
 from partial import FINE, cut, holes
 from partial_fine import run_study
 
-from cfsig.cells import cell_scores
-from cfsig.cfhks import DESIGNS
-from cfsig.mesh import read_mesh
-from cfsig.parts import FINE_SHARES, measure_part
-from cfsig.signature import compute_signature
+from cfsig.descriptors.cells import cell_scores
+from cfsig.descriptors.intrinsic import DESIGNS
+from cfsig.descriptors.signature import compute_signature
+from cfsig.files.mesh import read_mesh
+from cfsig.search.partial import FINE_SHARES, measure_part
 
 TITLE = "## A first stage for version 10: a study"
 KINDS = ("cut", "holes")
 BINS, BAND = DESIGNS[FINE.version or 0].fine or (0, 0)  # version 10's: 33 bins, steps within 4
 WIDTH = 2 * BAND + 1
-CELLS = BINS * WIDTH**3  # its four scales: the first's bin and three steps (cfsig.cells)
+CELLS = (
+    BINS * WIDTH**3
+)  # its four scales: the first's bin and three steps (cfsig.descriptors.cells)
 KEPT = (0.05, 0.10, 0.20)
 
 

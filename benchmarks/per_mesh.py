@@ -25,7 +25,9 @@ from pathlib import Path
 import common
 import numpy as np
 
-from cfsig.conformal import (
+from cfsig.descriptors.signature import signature_file, signature_of
+from cfsig.files.mesh import clean_mesh, parse_mesh, read_bytes
+from cfsig.operators.conformal import (
     ConformalFactor,
     available_solvers,
     curvature_error,
@@ -34,10 +36,8 @@ from cfsig.conformal import (
     operators,
     pinned_system,
 )
-from cfsig.geometry import cotan_laplacian
-from cfsig.mesh import clean_mesh, parse_mesh, read_bytes
+from cfsig.operators.geometry import cotan_laplacian
 from cfsig.params import Params
-from cfsig.signature import signature_file, signature_of
 
 STAGES = ("read", "operators", "solve", "curvature error", "sampling+histogram")
 

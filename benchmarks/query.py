@@ -28,7 +28,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cfsig.index import Entry, IndexReader, IndexWriter  # noqa: E402
+from cfsig.index.store import Entry, IndexReader, IndexWriter  # noqa: E402
 from cfsig.params import Params  # noqa: E402
 
 DOC = ROOT / "docs" / "performance.md"
@@ -39,7 +39,7 @@ ROUNDS = 2
 
 def build(path: Path, n: int, bins: int) -> float:
     """Write an index of n random normalised histograms; return the seconds taken."""
-    from cfsig.signature import Signature  # loads scipy: not in the measuring processes
+    from cfsig.descriptors.signature import Signature  # loads scipy: not in the measuring processes
 
     rng = np.random.default_rng(0)
     phi = np.zeros(1)
@@ -80,11 +80,11 @@ def baseline_nearest(reader: IndexReader, queries: np.ndarray, k: int):
 
 def measure(index: str, impl: str, n_queries: int, reps: int) -> dict:
     """In this process: one untimed run, then ``reps`` timed runs of open + query + names."""
-    import cfsig.l1
-    from cfsig.nearest import nearest
+    import cfsig.search.l1
+    from cfsig.search.nearest import nearest
 
     if impl == "numpy":
-        cfsig.l1.FAST_MIN_WORK = 1 << 62
+        cfsig.search.l1.FAST_MIN_WORK = 1 << 62
     scan = baseline_nearest if impl == "baseline" else nearest
     queries = np.random.default_rng(1).random((n_queries, 200)).astype(np.float32)
     queries /= queries.sum(axis=1, keepdims=True)
@@ -101,7 +101,7 @@ def measure(index: str, impl: str, n_queries: int, reps: int) -> dict:
         cpu.append(time.process_time() - c0)
         parts.append((t1 - t0, t3 - t2))
     with IndexReader(index) as reader:
-        chosen = cfsig.l1.choose_kernel(n_queries * len(reader))
+        chosen = cfsig.search.l1.choose_kernel(n_queries * len(reader))
         kernel = f"{chosen.__module__.removeprefix('cfsig.')}.{chosen.__name__}"
     return {
         "wall": float(np.median(wall[1:])), "cpu": float(np.median(cpu[1:])),
@@ -142,10 +142,10 @@ def fresh_process(index: Path) -> float:
     """Seconds for a new process to import cfsig's search, open, query once and read names."""
     code = (
         "import numpy as np\n"
-        "from cfsig.index import IndexReader\n"
-        "from cfsig.nearest import search\n"
+        "from cfsig.index.store import IndexReader\n"
+        "from cfsig.search.nearest import query\n"
         f"with IndexReader({str(index)!r}) as r:\n"
-        "    search(r, np.full((1, 200), 1 / 200), 20)\n"
+        "    query(r, np.full((1, 200), 1 / 200), 20)\n"
     )
     times = []
     for _ in range(3):
@@ -221,7 +221,7 @@ def report(rows: list[dict], build_s: dict, fresh: float, load: tuple, command: 
         "before): one copy from "
         "the page cache, no HDF5 in between; one thread per core takes chunks in turn; per query, "
         "the rows below the current k-th distance are merged into the k best with ties broken by "
-        "row number. Scans of at least `cfsig.l1.FAST_MIN_WORK` query-row pairs (one query over "
+        "row number. Scans of at least `cfsig.search.l1.FAST_MIN_WORK` query-row pairs (one query over "
         "500,000 rows) use faiss's L1 kernel when the optional extra `cfsig[fast]` is installed "
         "(faiss-cpu: one vectorised loop over 1024-row pieces, in groups of 10 queries; numba "
         "scans as fast but takes ten times as long to load, and 100 MB more), smaller "

@@ -26,9 +26,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-import cfsig.blocks  # noqa: E402
-import cfsig.l1  # noqa: E402
-import cfsig.nearest  # noqa: E402
+import cfsig.index.blocks  # noqa: E402
+import cfsig.search.l1  # noqa: E402
+import cfsig.search.nearest  # noqa: E402
 from benchmarks.query import baseline_nearest, peak_mb, versions  # noqa: E402
 
 DOC = ROOT / "docs" / "query-options.md"
@@ -73,16 +73,16 @@ def read_only(reader: Signatures, how: str) -> None:
             data.read_direct(rows, np.s_[start : start + len(rows)])
             np.einsum("ij->", rows)
         return
-    read = read_block_mapped if how.startswith("mapped") else cfsig.blocks.read_block
+    read = read_block_mapped if how.startswith("mapped") else cfsig.index.blocks.read_block
     buffer = np.empty((16384, BINS), np.float32)
-    for block in cfsig.blocks.plan_blocks(data, 16384):
+    for block in cfsig.index.blocks.plan_blocks(data, 16384):
         np.einsum("ij->", read(data, block, buffer))
 
 
 def read_block_mapped(dataset, block, buffer: np.ndarray) -> np.ndarray:
     """cfsig's `read_block` before preadv: each directly readable block memory-mapped."""
     if block.offset is None:
-        return cfsig.blocks.read_block(dataset, block, buffer)
+        return cfsig.index.blocks.read_block(dataset, block, buffer)
     count, bins = block.stop - block.start, dataset.shape[1]
     aligned = block.offset - block.offset % mmap.ALLOCATIONGRANULARITY
     view = mmap.mmap(
@@ -113,7 +113,7 @@ def l1_cdist(queries: np.ndarray, rows: np.ndarray, out: np.ndarray) -> None:
     out[:] = cdist(queries, rows, "cityblock")
 
 
-def l1_numba() -> cfsig.l1.Kernel:
+def l1_numba() -> cfsig.search.l1.Kernel:
     """The numba kernel cfsig used before faiss (one pass over the rows for all queries)."""
     import numba
 
@@ -132,24 +132,24 @@ def l1_numba() -> cfsig.l1.Kernel:
 def configure(option: str) -> None:
     """Set cfsig's search up for one option (kernel, threads, reading, piece size)."""
     threads = 1 if "1 thread" in option else 2
-    cfsig.nearest._threads = lambda: threads
-    kernel = cfsig.l1.l1_numpy
+    cfsig.search.nearest._threads = lambda: threads
+    kernel = cfsig.search.l1.l1_numpy
     if "numba" in option:
         kernel = l1_numba()
     elif "faiss" in option:
-        kernel = cfsig.l1.fast_kernel()
+        kernel = cfsig.search.l1.fast_kernel()
     elif "broadcast" in option:
         kernel = l1_numpy_broadcast
     elif "cdist" in option:
         kernel = l1_cdist
-    cfsig.nearest.choose_kernel = lambda work: kernel
+    cfsig.search.nearest.choose_kernel = lambda work: kernel
     if "read_direct" in option:
-        cfsig.blocks._plain = lambda dataset: False
+        cfsig.index.blocks._plain = lambda dataset: False
     if "mapped blocks" in option:
-        cfsig.nearest.read_block = read_block_mapped
+        cfsig.search.nearest.read_block = read_block_mapped
     for piece in (64, 1024):
         if f"pieces of {piece}" in option:
-            cfsig.l1._PIECE_ROWS = piece
+            cfsig.search.l1._PIECE_ROWS = piece
 
 
 def measure(path: str, option: str, n_queries: int) -> dict:
@@ -168,7 +168,7 @@ def measure(path: str, option: str, n_queries: int) -> dict:
         elif option.startswith("baseline"):
             baseline_nearest(reader, queries, 20)
         else:
-            cfsig.nearest.nearest(reader, queries, 20)
+            cfsig.search.nearest.nearest(reader, queries, 20)
         wall.append(time.perf_counter() - t)
         cpu.append(time.process_time() - c)
     return {
@@ -180,7 +180,7 @@ def measure(path: str, option: str, n_queries: int) -> dict:
 OPTIONS_1M = [
     "read: h5py slices of 16384 rows",
     "read: read_direct into a reused buffer",
-    "read: preadv blocks (cfsig.blocks)",
+    "read: preadv blocks (cfsig.index.blocks)",
     "read: mapped blocks (cfsig before preadv)",
     "baseline: numpy over h5py slices (the code before)",
     "numpy, 2 threads",
@@ -198,7 +198,7 @@ OPTIONS_1M = [
 ]
 OPTIONS_CONTIGUOUS = [
     "read: read_direct into a reused buffer",
-    "read: preadv blocks (cfsig.blocks)",
+    "read: preadv blocks (cfsig.index.blocks)",
     "read: mapped blocks (cfsig before preadv)",
     "faiss, 2 threads",
 ]
@@ -207,10 +207,10 @@ OPTIONS_BATCH = ["numpy, 2 threads", "faiss, 2 threads", "numba, 2 threads"]
 
 def load_cost(kernel: str) -> dict:
     """Seconds and peak memory to import a kernel's library and make a first call, fresh process."""
-    make = {"faiss": "cfsig.l1.fast_kernel()", "numba": "query_options.l1_numba()"}[kernel]
+    make = {"faiss": "cfsig.search.l1.fast_kernel()", "numba": "query_options.l1_numba()"}[kernel]
     code = (
         "import time, json, numpy as np\n"
-        "import cfsig.l1\n"
+        "import cfsig.search.l1\n"
         "from benchmarks import query_options\n"
         "from benchmarks.query import peak_mb\n"
         "before = peak_mb(); t = time.perf_counter()\n"

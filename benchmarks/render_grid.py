@@ -23,8 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from cfsig import figures, raster
-from cfsig.mesh import read_mesh
+from cfsig.figures import plots as figures
+from cfsig.figures import raster
+from cfsig.files.mesh import read_mesh
 
 SHREC = Path(__file__).resolve().parents[2] / "shared" / "data" / "shrec07"
 COLUMNS, TILE = 5, 160

@@ -17,10 +17,10 @@ import time
 import common
 import numpy as np
 
-from cfsig.conformal import conformal_factor
-from cfsig.mesh import Mesh, read_mesh
+from cfsig.descriptors.signature import compute_signature, signature_of
+from cfsig.files.mesh import Mesh, read_mesh
+from cfsig.operators.conformal import conformal_factor
 from cfsig.params import Params
-from cfsig.signature import compute_signature, signature_of
 
 
 def bare(mesh: Mesh, params: Params) -> tuple[np.ndarray, np.ndarray]:

@@ -27,9 +27,9 @@ from pathlib import Path
 import common
 import numpy as np
 
-from cfsig.conformal import available_solvers, operators
+from cfsig.descriptors.signature import mesh_and_signature
+from cfsig.operators.conformal import available_solvers, operators
 from cfsig.params import Params
-from cfsig.signature import mesh_and_signature
 
 
 def dump(args: argparse.Namespace) -> None:

@@ -36,10 +36,10 @@ from pathlib import Path
 
 import common
 
-from cfsig.conformal import factorize, operators, pinned_system
-from cfsig.mesh import read_mesh
+from cfsig.descriptors.signature import compute_signature, signature_file
+from cfsig.files.mesh import read_mesh
+from cfsig.operators.conformal import factorize, operators, pinned_system
 from cfsig.params import Params
-from cfsig.signature import compute_signature, signature_file
 
 EIGENVALUES = 50
 SOLVERS = ("scipy", "eigen")  # SuperLU as lapy uses, and cfsig's fastest solver without CHOLMOD

@@ -30,8 +30,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cfsig.conformal import factorize, operators, pinned_system
-from cfsig.mesh import read_mesh
+from cfsig.files.mesh import read_mesh
+from cfsig.operators.conformal import factorize, operators, pinned_system
 from cfsig.params import Params
 
 Solve = Callable[[sp.csc_matrix, np.ndarray], np.ndarray]

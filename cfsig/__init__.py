@@ -4,7 +4,7 @@ The names below are the library's public API, so that ``import cfsig`` is enough
 
     with cfsig.IndexReader("shrec07.h5") as index:
         query = cfsig.signature_file("ant/81.off", index.params).vector
-        hits = cfsig.search(index, query[None], k=20)[0]
+        hits = cfsig.query(index, query[None], k=20)[0]
 
 Each is imported from its module on first use (PEP 562), so that importing the package loads
 neither SciPy nor matplotlib.
@@ -18,28 +18,28 @@ from typing import TYPE_CHECKING, Any
 # Public name -> the module that defines it.
 _EXPORTS = {
     "Params": "params",
-    "Signature": "signature",
-    "signature_file": "signature",
-    "compute_signature": "signature",
-    "read_mesh": "mesh",
-    "Entry": "index",
-    "IndexReader": "index",
-    "IndexWriter": "index",
+    "Signature": "descriptors.signature",
+    "signature_file": "descriptors.signature",
+    "compute_signature": "descriptors.signature",
+    "read_mesh": "files.mesh",
+    "Entry": "index.store",
+    "IndexReader": "index.store",
+    "IndexWriter": "index.store",
     "index_meshes": "batch",
     "compute_many": "batch",
-    "Hit": "nearest",
-    "search": "nearest",
-    "partial_file": "parts",
-    "partial_search": "parts",
-    "evaluate_partial": "evaluate",
-    "evaluate_queries": "measures",
-    "Collection": "evaluate",
-    "compute_collection": "evaluate",
-    "collection_from_index": "evaluate",
-    "evaluate_collections": "evaluate",
-    "evaluate_distances": "measures",
-    "RetrievalReport": "measures",
-    "read_cla": "cla",
+    "Hit": "search.nearest",
+    "query": "search.nearest",
+    "partial_file": "search.partial",
+    "query_part": "search.partial",
+    "evaluate_partial": "evaluation.collections",
+    "evaluate_queries": "evaluation.measures",
+    "Collection": "evaluation.collections",
+    "compute_collection": "evaluation.collections",
+    "collection_from_index": "evaluation.collections",
+    "evaluate_collections": "evaluation.collections",
+    "evaluate_distances": "evaluation.measures",
+    "RetrievalReport": "evaluation.measures",
+    "read_cla": "files.cla",
     "CfsigError": "errors",
 }
 __all__ = [
@@ -64,30 +64,30 @@ __all__ = [
     "index_meshes",
     "read_cla",
     "partial_file",
-    "partial_search",
+    "query_part",
     "read_mesh",
-    "search",
+    "query",
     "signature_file",
 ]  # the keys of _EXPORTS and __version__ (tests/test_api.py checks)
 
 if TYPE_CHECKING:
-    from .batch import compute_many, index_meshes
-    from .cla import read_cla
-    from .errors import CfsigError
-    from .evaluate import (
+    from cfsig.batch import compute_many, index_meshes
+    from cfsig.descriptors.signature import Signature, compute_signature, signature_file
+    from cfsig.errors import CfsigError
+    from cfsig.evaluation.collections import (
         Collection,
         collection_from_index,
         compute_collection,
         evaluate_collections,
         evaluate_partial,
     )
-    from .index import Entry, IndexReader, IndexWriter
-    from .measures import RetrievalReport, evaluate_distances, evaluate_queries
-    from .mesh import read_mesh
-    from .nearest import Hit, search
-    from .params import Params
-    from .parts import partial_file, partial_search
-    from .signature import Signature, compute_signature, signature_file
+    from cfsig.evaluation.measures import RetrievalReport, evaluate_distances, evaluate_queries
+    from cfsig.files.cla import read_cla
+    from cfsig.files.mesh import read_mesh
+    from cfsig.index.store import Entry, IndexReader, IndexWriter
+    from cfsig.params import Params
+    from cfsig.search.nearest import Hit, query
+    from cfsig.search.partial import partial_file, query_part
 
     __version__: str
 
@@ -102,7 +102,7 @@ def __getattr__(name: str) -> Any:
         except PackageNotFoundError:  # running from a source tree that was not installed
             value = "0.0.0"
     elif name in _EXPORTS:
-        value = getattr(import_module(f".{_EXPORTS[name]}", __name__), name)
+        value = getattr(import_module(f"cfsig.{_EXPORTS[name]}"), name)
     else:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     globals()[name] = value

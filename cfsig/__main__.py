@@ -1,5 +1,5 @@
 """Run the command line with ``python -m cfsig``."""
 
-from .cli import main
+from cfsig.cli import main
 
 main()

@@ -15,14 +15,14 @@ from itertools import islice
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .errors import CfsigError, ClusterError, MissingDependencyError
-from .files import find_meshes, mesh_label
-from .params import Params
+from cfsig.errors import CfsigError, ClusterError, MissingDependencyError
+from cfsig.files.folders import find_meshes, mesh_label
+from cfsig.params import Params
 
 if TYPE_CHECKING:  # neither HDF5 in the workers, nor SciPy in the process that writes the index
-    from .index import IndexWriter
-    from .isolate import Limits
-    from .signature import Signature
+    from cfsig.descriptors.signature import Signature
+    from cfsig.index.store import IndexWriter
+    from cfsig.isolate import Limits
 
 _CONNECT_TIMEOUT = "20s"
 _COMMIT_SECONDS = 30.0
@@ -91,10 +91,10 @@ def compute_many(
         instead of local processes. Needs the ``dask`` extra, and cfsig installed on the workers.
     compute : callable, optional
         ``compute(path, params, solver) -> Signature``, a module-level function (it is pickled
-        by name); `cfsig.signature.signature_file` unless a caller wraps it.
+        by name); `cfsig.descriptors.signature.signature_file` unless a caller wraps it.
     limits : Limits, optional
         Wall time and memory allowed to each file's proxy remesh, when ``compute`` is the
-        default (`cfsig.signature.signature_file`).
+        default (`cfsig.descriptors.signature.signature_file`).
 
     Yields
     ------
@@ -153,7 +153,7 @@ def index_meshes(
 ) -> tuple[int, list[str]]:
     """Compute the new and changed meshes under some files and folders and add them to an index.
 
-    Files are found by `cfsig.files.find_meshes` as the computation goes: the first is computed
+    Files are found by `cfsig.files.folders.find_meshes` as the computation goes: the first is computed
     as soon as it is found, not after the whole folder has been scanned. A file whose name is
     indexed with the same contents (SHA-256) is skipped, and only those files are hashed; the
     others are computed by `compute_many` and added as `Entry` (name, the name of the folder
@@ -198,7 +198,7 @@ def index_meshes(
     IndexFileError
         A commit failed.
     """
-    from .index import Entry
+    from cfsig.index.store import Entry
 
     roots = list(paths)
     names: dict[Path, str] = {}  # the files found to compute (those in flight), and their names
@@ -348,10 +348,10 @@ def _compute_on_cluster(
 
 
 def _signature_file(limits: Limits | None) -> Compute:
-    """`cfsig.signature.signature_file` with ``limits``, imported when first needed: the process
+    """`cfsig.descriptors.signature.signature_file` with ``limits``, imported when first needed: the process
     that hands out the files and writes the index computes nothing, and so starts without
     loading SciPy (docs/performance.md, "Start-up")."""
-    from .signature import signature_file
+    from cfsig.descriptors.signature import signature_file
 
     return signature_file if limits is None else partial(signature_file, limits=limits)
 
@@ -405,7 +405,7 @@ def _start_worker(parent: int) -> None:
     """In a new worker: one thread per native thread pool, and exit when the parent dies."""
     from threadpoolctl import threadpool_limits
 
-    from .conformal import available_solvers
+    from cfsig.operators.conformal import available_solvers
 
     available_solvers()  # loads the solver libraries, so that the limit reaches their pools too
     threadpool_limits(1)  # stays in force for the life of the worker

@@ -14,14 +14,14 @@ from typing import TYPE_CHECKING, Any, NoReturn
 
 import click
 
-from .errors import CfsigError
-from .isolate import Limits
-from .params import DEFAULT_VERSIONS, DESCRIPTORS, REPAIR_MODES, SOLVERS, Params
+from cfsig.errors import CfsigError
+from cfsig.isolate import Limits
+from cfsig.params import DEFAULT_VERSIONS, DESCRIPTORS, REPAIR_MODES, SOLVERS, Params
 
 if TYPE_CHECKING:  # each command imports what it uses, so that `cfsig --help` starts fast
-    from .evaluate import Collection, Evaluation
-    from .measures import RetrievalReport
-    from .signature import Signature
+    from cfsig.descriptors.signature import Signature
+    from cfsig.evaluation.collections import Collection, Evaluation
+    from cfsig.evaluation.measures import RetrievalReport
 
 EXIT_ERROR = 1
 EXIT_SKIPPED = 3
@@ -213,7 +213,7 @@ def compute(
         raise click.UsageError("--hist plots the histograms of the cf descriptor")
     import numpy as np
 
-    from .signature import mesh_and_signature
+    from cfsig.descriptors.signature import mesh_and_signature
 
     rows: list[dict] = []
     failed: list[str] = []
@@ -336,8 +336,8 @@ def index(
     """
     if jobs is not None and scheduler is not None:
         raise click.UsageError("give --jobs or --scheduler, not both")
-    from .batch import index_meshes
-    from .index import IndexReader, IndexWriter
+    from cfsig.batch import index_meshes
+    from cfsig.index.store import IndexReader, IndexWriter
 
     routes: Counter[str] = Counter()
     try:
@@ -428,21 +428,21 @@ def query(index_file, meshes, k, solver, stage_timeout, as_json, png, partial) -
     """
     import numpy as np
 
-    from .index import IndexReader
-    from .nearest import search
-    from .parts import partial_file, partial_search
-    from .signature import signature_file
+    from cfsig.descriptors.signature import signature_file
+    from cfsig.index.store import IndexReader
+    from cfsig.search.nearest import query
+    from cfsig.search.partial import partial_file, query_part
 
     try:
         with IndexReader(index_file) as reader:
             fits: list[float] = []
             if partial:
-                found = [partial_search(reader, partial_file(p, reader.params), k) for p in meshes]
+                found = [query_part(reader, partial_file(p, reader.params), k) for p in meshes]
                 results, fits = [hits for hits, _ in found], [fit for _, fit in found]
             else:
                 limits = Limits(stage_timeout)
                 sigs = [signature_file(p, reader.params, solver, limits).vector for p in meshes]
-                results = search(reader, np.array(sigs), k)
+                results = query(reader, np.array(sigs), k)
             classes = set(reader.column("labels")) if png else set()
     except CfsigError as exc:
         _fail(str(exc))
@@ -561,8 +561,8 @@ def evaluate(
     wanted = _descriptor_list(descriptors)
     if len(wanted) > 1 and (plot or report_dir):
         raise click.UsageError("--plot and --report take one descriptor")
-    from .cla import read_cla
-    from .evaluate import collection_from_index, evaluate_collections
+    from cfsig.evaluation.collections import collection_from_index, evaluate_collections
+    from cfsig.files.cla import read_cla
 
     try:
         cla = read_cla(classes) if classes else None
@@ -625,7 +625,7 @@ def evaluate(
 
 def _evaluate_partial(index_file: Path, parts: Path, as_json: bool) -> None:
     """Print the measures of partial queries against an index, and the parts that failed."""
-    from .evaluate import evaluate_partial
+    from cfsig.evaluation.collections import evaluate_partial
 
     try:
         report, failures = evaluate_partial(index_file, parts)
@@ -659,7 +659,7 @@ def _compute_folder(
     limits: Limits,
 ) -> Collection:
     """A folder's collection under a progress bar; failures go to ``skipped``, exit if none."""
-    from .evaluate import compute_collection
+    from cfsig.evaluation.collections import compute_collection
 
     bar = partial(_progress, what=f"computing {params.descriptor}", routes=routes)
     collection, failures = compute_collection(folder, params, solver, jobs, strict, bar, limits)
@@ -709,7 +709,7 @@ def check(index_file) -> None:
     Example:
       cfsig check shrec07.h5
     """
-    from .index import IndexReader, check_index
+    from cfsig.index.store import IndexReader, check_index
 
     try:
         problems = check_index(index_file)
@@ -739,7 +739,7 @@ def compact(index_file) -> None:
     Example:
       cfsig compact shrec07.h5
     """
-    from .index import compact_index
+    from cfsig.index.store import compact_index
 
     try:
         before, rows = compact_index(index_file)
@@ -760,7 +760,7 @@ def convert(old, new) -> None:
     Example:
       cfsig convert shrec07-v1.h5 shrec07.h5
     """
-    from .index import convert_index
+    from cfsig.index.store import convert_index
 
     try:
         rows = convert_index(old, new)
@@ -789,7 +789,7 @@ def demo(ctx: click.Context, out: Path) -> None:
     Example:
       cfsig demo --out /tmp/cfsig-demo
     """
-    from .demo import make_demo_collection
+    from cfsig.files.demo import make_demo_collection
 
     paths = make_demo_collection(out / "meshes")
     click.echo(f"Wrote {len(paths)} meshes to {out / 'meshes'}")
@@ -824,7 +824,7 @@ def _warn_undrawn(problems: list[str]) -> None:
 
 def _compute_pictures(drawn: list, params: Params, png, ply, hist) -> None:
     """The pictures of `compute`: phi on the meshes, a coloured PLY, the histograms."""
-    from . import figures
+    from cfsig.figures import plots as figures
 
     with _writing_pictures():
         if png:
@@ -840,8 +840,8 @@ def _compute_pictures(drawn: list, params: Params, png, ply, hist) -> None:
 
 def _query_picture(png: Path, meshes, results, classes: set[str]) -> None:
     """The grid of each query (one row per query, wrapped) and its results."""
-    from . import figures
-    from .files import mesh_label
+    from cfsig.figures import plots as figures
+    from cfsig.files.folders import mesh_label
 
     rows = []
     for path, hits in zip(meshes, results, strict=True):
@@ -858,8 +858,8 @@ def _query_picture(png: Path, meshes, results, classes: set[str]) -> None:
 
 def _evaluate_pictures(plot, report_dir, result: Evaluation) -> None:
     """The precision/recall plot and the HTML report of `evaluate`."""
-    from . import figures
-    from .report import write_report
+    from cfsig.figures import plots as figures
+    from cfsig.figures.report import write_report
 
     report, kept = result.report, result.collection
     columns = (kept.names, kept.labels, kept.paths)

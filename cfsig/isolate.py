@@ -20,7 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from .errors import StageLimitError
+from cfsig.errors import StageLimitError
 
 
 @dataclass(frozen=True)

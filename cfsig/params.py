@@ -12,7 +12,7 @@ DESCRIPTORS = ("cf", "cfhks")
 VERSIONS = {"cf": (1,), "cfhks": (1, 2, 3, 4, 5, 6, 7, 8, 9, 10)}
 DEFAULT_VERSIONS = {"cf": 1, "cfhks": 9}
 REPAIR_MODES = ("auto", "off", "proxy")
-# The length of the cfhks vector per version, `cfsig.cfhks.DESIGNS[version].length`
+# The length of the cfhks vector per version, `cfsig.descriptors.intrinsic.DESIGNS[version].length`
 # (tests/test_cfhks.py checks that the two agree), here so that an index needs no SciPy.
 CFHKS_LENGTHS = {
     1: 64 + 30 + 64 * 4,
@@ -26,17 +26,22 @@ CFHKS_LENGTHS = {
     9: 45 + 64 * 8 + 3 * 17 * 5,
     10: 45 + 64 * 8 + 3 * 17 * 5,
 }
-# The width of its curvature channel, the vector's last columns (`cfsig.cfhks.channel_columns`),
+# The width of its curvature channel, the vector's last columns (`cfsig.descriptors.intrinsic.channel_columns`),
 # for the versions that have one.
 CFHKS_CURVATURE = {
     **dict.fromkeys((3, 4), 48 * 4),
     **dict.fromkeys((5, 6, 7, 8), 49 * 4),
     **dict.fromkeys((9, 10), 3 * 17 * 5),
 }
-# The fine curvature cells kept per row beside the vector, `cfsig.cells.SLOTS`, by the versions
-# that keep them (`cfsig.cfhks.Design.fine`).
+# The fine curvature cells kept per row beside the vector, `cfsig.descriptors.cells.SLOTS`, by the versions
+# that keep them (`cfsig.descriptors.intrinsic.Design.fine`).
 CFHKS_CELLS = {10: 1024}
-SOLVERS = ("auto", "cholmod", "eigen", "scipy")  # sparse solver backends (`cfsig.conformal`)
+SOLVERS = (
+    "auto",
+    "cholmod",
+    "eigen",
+    "scipy",
+)  # sparse solver backends (`cfsig.operators.conformal`)
 
 
 @dataclass(frozen=True)
@@ -53,7 +58,7 @@ class Params:
         paper's histogram of phi, to which every other attribute applies; ``"cfhks"``, the
         low Laplace-Beltrami spectrum and heat kernel signatures (version 1 also the quantiles
         of phi, version 3 and later also the curvature at four scales), whose constants are
-        fixed per version in `cfsig.cfhks` and which uses only ``mollify`` and ``repair`` of
+        fixed per version in `cfsig.descriptors.intrinsic` and which uses only ``mollify`` and ``repair`` of
         the others.
     bins : int
         Number of histogram bins (paper section 2.3: 200).
@@ -72,7 +77,7 @@ class Params:
         (Sharp and Crane 2020); 0 disables it.
     repair : str
         What to do with a mesh that is not one closed manifold (one of `REPAIR_MODES`;
-        `cfsig.repair.repair_mesh`): ``"auto"`` repairs it locally or replaces it by a proxy
+        `cfsig.repair.stage.repair_mesh`): ``"auto"`` repairs it locally or replaces it by a proxy
         of its outer surface, ``"proxy"`` always takes the proxy, ``"off"`` solves each part
         as read. Clean closed manifolds are never changed.
     """
@@ -204,7 +209,7 @@ def cell_slots(params: Params) -> int | None:
     Returns
     -------
     slots : int or None
-        `cfsig.cells.SLOTS` for ``cfhks`` version 10 and later; None for descriptors that keep
+        `cfsig.descriptors.cells.SLOTS` for ``cfhks`` version 10 and later; None for descriptors that keep
         none.
     """
     return CFHKS_CELLS.get(params.version or 0) if params.descriptor == "cfhks" else None

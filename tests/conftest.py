@@ -19,8 +19,8 @@ def sphere():
 
 @pytest.fixture(scope="session")
 def body():
-    """A body with three limbs, in its rest pose (`cfsig.demo.limbed_body`)."""
-    from cfsig.demo import limbed_body
+    """A body with three limbs, in its rest pose (`cfsig.files.demo.limbed_body`)."""
+    from cfsig.files.demo import limbed_body
 
     return limbed_body(3, 0)
 
@@ -43,11 +43,11 @@ def build_index():
 @pytest.fixture(params=["numpy", "faiss"])
 def kernel(request, monkeypatch):
     """Force one L1 kernel on every scan (faiss: skipped when it is not installed)."""
-    import cfsig.l1
+    import cfsig.search.l1
 
     if request.param == "faiss":
         pytest.importorskip("faiss")
-        monkeypatch.setattr(cfsig.l1, "FAST_MIN_WORK", 0)
+        monkeypatch.setattr(cfsig.search.l1, "FAST_MIN_WORK", 0)
     else:
-        monkeypatch.setattr(cfsig.l1, "fast_kernel", lambda: None)
+        monkeypatch.setattr(cfsig.search.l1, "fast_kernel", lambda: None)
     return request.param

@@ -6,7 +6,7 @@ It lives in a module of its own so that spawned worker processes can import it b
 
 import os
 
-from cfsig.signature import signature_file
+from cfsig.descriptors.signature import signature_file
 
 
 def signature_or_crash(path, params, solver):

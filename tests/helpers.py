@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from cfsig.index import Entry, IndexWriter
-from cfsig.mesh import clean_mesh
+from cfsig.descriptors.signature import Signature, compute_signature
+from cfsig.files.mesh import clean_mesh
+from cfsig.index.store import Entry, IndexWriter
 from cfsig.params import Params
-from cfsig.signature import Signature, compute_signature
 
 
 def icosphere(levels: int = 3) -> tuple[np.ndarray, np.ndarray]:

@@ -29,9 +29,13 @@ def _loaded_after(code: str) -> set[str]:
 def test_import_cfsig_and_the_cli_load_neither_scipy_nor_matplotlib():
     for code in ("import cfsig", "import cfsig.cli"):  # `cfsig --help` starts without NumPy
         assert not _loaded_after(code) & {"numpy", "h5py", "scipy", "matplotlib"}, code
-    assert not _loaded_after("import cfsig.index") & {"scipy", "matplotlib"}
+    assert not _loaded_after("import cfsig.index.store") & {"scipy", "matplotlib"}
     # the process that hands files to the workers and writes the index
-    assert not _loaded_after("import cfsig.batch, cfsig.files") & {"scipy", "h5py", "matplotlib"}
+    assert not _loaded_after("import cfsig.batch, cfsig.files.folders") & {
+        "scipy",
+        "h5py",
+        "matplotlib",
+    }
     assert "scipy" in _loaded_after("import cfsig\ncfsig.signature_file")  # loaded when used
 
 
@@ -43,5 +47,5 @@ def test_readme_example_runs_from_the_package(tmp_path):
     with cfsig.IndexWriter(tmp_path / "i.h5", cfsig.Params()) as writer:
         writer.add(cfsig.Entry("ball/1.off", "ball", str(path)), sig)
     with cfsig.IndexReader(tmp_path / "i.h5") as index:
-        hits = cfsig.search(index, sig.vector[None], k=1)[0]
+        hits = cfsig.query(index, sig.vector[None], k=1)[0]
     assert hits[0].entry.name == "ball/1.off" and hits[0].distance == 0

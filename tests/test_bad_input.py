@@ -9,9 +9,9 @@ import trimesh
 from click.testing import CliRunner
 
 from cfsig.cli import EXIT_SKIPPED, main
-from cfsig.mesh import MAX_COORDINATE, MIN_SPAN, read_mesh
+from cfsig.descriptors.signature import compute_signature, signature_file
+from cfsig.files.mesh import MAX_COORDINATE, MIN_SPAN, read_mesh
 from cfsig.params import Params
-from cfsig.signature import compute_signature, signature_file
 from tests.helpers import disk, icosphere, off_text, open_cylinder
 
 
@@ -132,7 +132,7 @@ def test_zero_area_and_needle_triangles_are_mollified():
 
 
 def read_mesh_arrays(v, f):
-    from cfsig.mesh import clean_mesh
+    from cfsig.files.mesh import clean_mesh
 
     return clean_mesh(v, f)
 
@@ -178,7 +178,7 @@ def test_meshes_at_the_bounds_of_scale_are_measured_cleanly(scale):
     # Just inside MAX_COORDINATE and MIN_SPAN: every descriptor (the open cylinder through the
     # repair stage) and partial queries (the cylinder as a part) give finite values without a
     # warning.
-    from cfsig.parts import measure_part
+    from cfsig.search.partial import measure_part
 
     sphere, cylinder = icosphere(3), open_cylinder()
     for v, _ in (sphere, cylinder):

@@ -11,14 +11,14 @@ import pytest
 from click.testing import CliRunner
 
 import cfsig
-import cfsig.index
+import cfsig.index.store
 from cfsig import batch
 from cfsig.batch import compute_many, index_meshes
 from cfsig.cli import main
+from cfsig.descriptors.signature import signature_file
 from cfsig.errors import ClusterError
-from cfsig.index import IndexReader, IndexWriter
+from cfsig.index.store import IndexReader, IndexWriter
 from cfsig.params import Params
-from cfsig.signature import signature_file
 from tests.crashing import signature_or_crash
 from tests.helpers import icosphere, torus, write_off
 
@@ -238,9 +238,9 @@ def test_index_meshes_computes_while_the_folder_is_scanned(meshes, tmp_path, mon
     assert totals == sorted(totals) and totals[0] < totals[-1] == 6  # the total grew
     (meshes / "round" / "new.off").write_bytes((meshes / "ring" / "d.off").read_bytes())
     hashed = []
-    real_sha256 = cfsig.index.hashlib.sha256
+    real_sha256 = cfsig.index.store.hashlib.sha256
     monkeypatch.setattr(
-        cfsig.index.hashlib, "sha256", lambda data: hashed.append(data) or real_sha256(data)
+        cfsig.index.store.hashlib, "sha256", lambda data: hashed.append(data) or real_sha256(data)
     )
     with IndexWriter(tmp_path / "i", Params()) as writer:
         added, _ = index_meshes(writer, [meshes], jobs=1)

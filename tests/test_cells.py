@@ -1,4 +1,4 @@
-"""Fine curvature cells (cfsig.cells): the histograms, their scores, version 10's signatures and
+"""Fine curvature cells (cfsig.descriptors.cells): the histograms, their scores, version 10's signatures and
 their storage in an index."""
 
 import functools
@@ -9,8 +9,7 @@ import h5py
 import numpy as np
 import pytest
 
-from cfsig.blocks import plan_blocks
-from cfsig.cells import (
+from cfsig.descriptors.cells import (
     FAST_MIN_ROWS,
     SLOTS,
     UNIT,
@@ -21,13 +20,14 @@ from cfsig.cells import (
     part_scorer,
     window_cells,
 )
-from cfsig.cfhks import DESIGNS, curvature_histograms
+from cfsig.descriptors.intrinsic import DESIGNS, curvature_histograms
+from cfsig.descriptors.signature import compute_signature
 from cfsig.errors import IndexFileError
-from cfsig.index import Entry, IndexReader, IndexWriter, check_index, convert_index
-from cfsig.mesh import clean_mesh
+from cfsig.files.mesh import clean_mesh
+from cfsig.index.blocks import plan_blocks
+from cfsig.index.store import Entry, IndexReader, IndexWriter, check_index, convert_index
 from cfsig.params import Params, cell_slots, signature_length
-from cfsig.parts import FINE_SHARES, Part, measure_part, partial_distances, partial_search
-from cfsig.signature import compute_signature
+from cfsig.search.partial import FINE_SHARES, Part, measure_part, partial_distances, query_part
 from tests.helpers import random_signature, torus
 
 V10 = Params(descriptor="cfhks", version=10)
@@ -146,7 +146,7 @@ def test_compiled_scores_are_numpys(slots):
 
 @pytest.mark.parametrize("cpu", ["x86-64", "haswell"])  # SSE2 only; AVX2 without AVX-512
 def test_compiled_scores_on_older_processors(monkeypatch, cpu):
-    cells_llvm = pytest.importorskip("cfsig.cells_llvm", reason="the extra cfsig[fast]")
+    cells_llvm = pytest.importorskip("cfsig.search.cells_llvm", reason="the extra cfsig[fast]")
     if os.uname().machine != "x86_64":
         pytest.skip("the processors named are x86's")
     monkeypatch.setattr(cells_llvm, "_kernel", functools.partial(cells_llvm._kernel, cpu))
@@ -161,7 +161,7 @@ def test_compiled_scores_on_older_processors(monkeypatch, cpu):
 
 
 def test_compiled_scores_take_16_shares_at_most():
-    cells_llvm = pytest.importorskip("cfsig.cells_llvm", reason="the extra cfsig[fast]")
+    cells_llvm = pytest.importorskip("cfsig.search.cells_llvm", reason="the extra cfsig[fast]")
     part = [(np.array([1, 2]), np.array([0.5, 0.5]))] * 17
     with pytest.raises(ValueError, match="17 shares"):
         cells_llvm.part_scorer(part, (1.0,) * 17)
@@ -176,9 +176,9 @@ def test_numpy_scores_without_llvmlite(monkeypatch, case):
         def fail(name):
             raise ImportError(f"{name}: no module named llvmlite")
 
-        monkeypatch.setattr("cfsig.cells.importlib.import_module", fail)
+        monkeypatch.setattr("cfsig.descriptors.cells.importlib.import_module", fail)
     if case == "no executable memory":
-        cells_llvm = pytest.importorskip("cfsig.cells_llvm", reason="the extra cfsig[fast]")
+        cells_llvm = pytest.importorskip("cfsig.search.cells_llvm", reason="the extra cfsig[fast]")
 
         def forbidden():
             raise OSError(13, "cannot allocate executable memory")
@@ -276,16 +276,16 @@ def kernel(request, monkeypatch):
     if request.param == "compiled":
         pytest.importorskip("llvmlite", reason="the compiled kernel is the extra cfsig[fast]")
     fast_min_rows = 0 if request.param == "compiled" else 1 << 62
-    monkeypatch.setattr("cfsig.cells.FAST_MIN_ROWS", fast_min_rows)
+    monkeypatch.setattr("cfsig.descriptors.cells.FAST_MIN_ROWS", fast_min_rows)
     return request.param
 
 
 def _search_finds_the_nearest(reader, cells):
-    """`partial_search` of a part of even fractions on ``cells`` at every share finds the whole
+    """`query_part` of a part of even fractions on ``cells`` at every share finds the whole
     of the smallest `partial_distances`, at that distance."""
     part = Part(cells=((cells, np.full(len(cells), 1 / len(cells))),) * len(FINE_SHARES))
     expected = partial_distances(part, reader.signatures[:], V10, reader.cells())
-    hits, distance = partial_search(reader, part, 3)
+    hits, distance = query_part(reader, part, 3)
     assert hits[0].entry.name == reader.column("names")[np.argmin(expected)]
     assert distance == pytest.approx(expected.min(), abs=1e-5)
 
@@ -301,7 +301,7 @@ def test_partial_search_reads_every_live_rows_cells(tmp_path, kernel):
     rng = np.random.default_rng(8)
     with IndexReader(index) as reader:
         assert len(reader.segments) > 1 and any(len(v.dead) for v in reader.segments)
-        # The cells are read from the file directly (cfsig.blocks), not through h5py.
+        # The cells are read from the file directly (cfsig.index.blocks), not through h5py.
         assert all(b.offset is not None for b in plan_blocks(reader.segments[0].cells[0], 4))
         stored, fractions = reader.cells()
         view = next(v for v in reader.segments if len(v.dead))
@@ -340,7 +340,7 @@ def test_partial_search_without_memory_maps_reads_the_blocks(tmp_path, monkeypat
     def refuse(*args, **kwargs):
         raise OSError("this file system has no memory maps")
 
-    monkeypatch.setattr("cfsig.blocks.mmap.mmap", refuse)
+    monkeypatch.setattr("cfsig.index.blocks.mmap.mmap", refuse)
     with IndexReader(index) as reader:
         stored, fractions = reader.cells()
         for row in (2, 5):
@@ -359,4 +359,4 @@ def test_cells_cut_short_after_opening_are_a_clear_error(tmp_path):
         os.truncate(segment, block.offset + 10)
         part = Part(cells=((np.array([1, 2]), np.array([0.5, 0.5])),) * len(FINE_SHARES))
         with pytest.raises(IndexFileError, match="ends inside /cell_fractions"):
-            partial_search(reader, part, 3)
+            query_part(reader, part, 3)

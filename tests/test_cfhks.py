@@ -5,15 +5,16 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from cfsig import cfhks, simplify
 from cfsig.cli import main
-from cfsig.conformal import conformal_factor, operators
-from cfsig.curvature import smoothed_curvature
+from cfsig.descriptors import intrinsic as cfhks
+from cfsig.descriptors.signature import compute_signature, needs_phi
 from cfsig.errors import SolverError
-from cfsig.index import IndexReader, IndexWriter, check_index
-from cfsig.mesh import clean_mesh
+from cfsig.files.mesh import clean_mesh
+from cfsig.index.store import IndexReader, IndexWriter, check_index
+from cfsig.operators.conformal import conformal_factor, operators
+from cfsig.operators.curvature import smoothed_curvature
 from cfsig.params import DEFAULT_VERSIONS, VERSIONS, Params, curvature_slice, signature_length
-from cfsig.signature import compute_signature, needs_phi
+from cfsig.repair import simplify
 from tests.helpers import (
     disk,
     icosphere,

@@ -7,8 +7,8 @@ from click.testing import CliRunner
 import cfsig.cli
 from cfsig import __version__
 from cfsig.cli import EXIT_SKIPPED, main
-from cfsig.demo import make_demo_collection
-from cfsig.evaluate import compute_collection
+from cfsig.evaluation.collections import compute_collection
+from cfsig.files.demo import make_demo_collection
 from tests.helpers import read_plain
 
 
@@ -216,7 +216,9 @@ def test_evaluate_strict_stops_before_the_next_descriptor(collection, tmp_path, 
         computed.append(params.descriptor)
         return compute_collection(folder, params, *args)
 
-    monkeypatch.setattr(cfsig.evaluate, "compute_collection", recording)  # cli imports it per call
+    monkeypatch.setattr(
+        cfsig.evaluation.collections, "compute_collection", recording
+    )  # cli imports it per call
     result = _run("evaluate", folder, "--descriptor", "cf,cfhks", "-j", "1", "--strict")
     assert result.exit_code == 1 and "bad.off" in result.output
     assert computed == ["cf"]

@@ -1,16 +1,17 @@
 import numpy as np
 import pytest
 
-from cfsig import geometry
-from cfsig.conformal import (
+from cfsig.errors import SolverError
+from cfsig.files import elements
+from cfsig.files.mesh import clean_mesh
+from cfsig.operators import geometry
+from cfsig.operators.conformal import (
     available_solvers,
     conformal_factor,
     factorize_laplacian,
     laplacian_solver,
     pinned_system,
 )
-from cfsig.errors import SolverError
-from cfsig.mesh import clean_mesh
 from tests.helpers import icosphere, random_rotation, torus
 
 
@@ -25,7 +26,7 @@ def _bumpy(seed=0):
 def test_phi_solves_equation_with_zero_mean():
     v, f = _bumpy()
     cf = conformal_factor(clean_mesh(v, f))
-    lap = geometry.cotan_laplacian(geometry.edge_lengths(v, f), f, len(v))
+    lap = geometry.cotan_laplacian(elements.edge_lengths(v, f), f, len(v))
     assert np.allclose(lap @ cf.phi, cf.operators.target - cf.operators.curvature, atol=1e-9)
     assert abs(cf.phi.mean()) < 1e-12
 
@@ -65,7 +66,7 @@ def test_eigen_refuses_a_singular_system():
     # Two spheres labelled as one component: one pinned vertex leaves the other sphere floating.
     v, f = icosphere(2)
     v2, f2 = np.vstack([v, v + 3]), np.vstack([f, f + len(v)])
-    lap = geometry.cotan_laplacian(geometry.edge_lengths(v2, f2), f2, len(v2))
+    lap = geometry.cotan_laplacian(elements.edge_lengths(v2, f2), f2, len(v2))
     rhs = np.random.default_rng(0).standard_normal(len(v2))
     rhs[: len(v)] -= rhs[: len(v)].mean()
     rhs[len(v) :] -= rhs[len(v) :].mean()
@@ -110,7 +111,7 @@ def test_pinned_system_drops_the_first_vertex_of_each_component(parts):
     v, f = torus(nu=12, nv=6)
     f = np.vstack([f + k * len(v) for k in range(parts)])
     lap = geometry.cotan_laplacian(
-        geometry.edge_lengths(np.vstack([v] * parts), f), f, parts * len(v)
+        elements.edge_lengths(np.vstack([v] * parts), f), f, parts * len(v)
     )
     labels = np.repeat(np.arange(parts), len(v))
     system, keep = pinned_system(lap, labels)
@@ -127,7 +128,7 @@ def test_laplacian_solver_solves_up_to_a_constant_per_component(parts):
         np.vstack([v + 3 * k for k in range(parts)]),
         np.vstack([f + k * 162 for k in range(parts)]),
     )
-    lap = geometry.cotan_laplacian(geometry.edge_lengths(v, f), f, len(v))
+    lap = geometry.cotan_laplacian(elements.edge_lengths(v, f), f, len(v))
     labels = np.repeat(np.arange(parts), 162)
     rhs = np.random.default_rng(1).standard_normal(len(v))
     rhs -= (np.bincount(labels, weights=rhs) / 162)[labels]

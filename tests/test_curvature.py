@@ -1,10 +1,11 @@
 import numpy as np
 import pytest
 
-from cfsig import cfhks, curvature
-from cfsig.conformal import operators
-from cfsig.curvature import smoothed_curvature
-from cfsig.mesh import clean_mesh
+from cfsig.descriptors import intrinsic as cfhks
+from cfsig.files.mesh import clean_mesh
+from cfsig.operators import curvature
+from cfsig.operators.conformal import operators
+from cfsig.operators.curvature import smoothed_curvature
 from tests.helpers import disk, icosphere, random_rotation, torus
 
 SCALES = (0.0000625, 0.001, 0.01)

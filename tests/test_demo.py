@@ -1,11 +1,11 @@
-"""Tests for the synthetic demo collection in :mod:`cfsig.demo`."""
+"""Tests for the synthetic demo collection in :mod:`cfsig.files.demo`."""
 
 import numpy as np
 import pytest
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from cfsig import demo
+from cfsig.files import demo
 
 GENERATORS = {
     "capsule": lambda: demo.capsule(),

@@ -14,8 +14,8 @@ import pytest
 from click.testing import CliRunner
 
 from cfsig.cli import main
-from cfsig.demo import make_demo_collection
-from cfsig.index import FORMAT_VERSION, Entry, IndexReader, IndexWriter, check_index
+from cfsig.files.demo import make_demo_collection
+from cfsig.index.store import FORMAT_VERSION, Entry, IndexReader, IndexWriter, check_index
 from cfsig.params import Params
 from tests.helpers import random_signature
 

@@ -1,4 +1,4 @@
-"""Tests for cfsig.measures, cfsig.cla and cfsig.evaluate: PSB measures, .cla files, collections."""
+"""Tests for cfsig.evaluation.measures, cfsig.files.cla and cfsig.evaluation.collections: PSB measures, .cla files, collections."""
 
 import json
 import math
@@ -7,19 +7,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cfsig.cla import read_cla
-from cfsig.demo import write_off
+from cfsig.descriptors.signature import signature_file
 from cfsig.errors import IndexFileError, MeshError
-from cfsig.evaluate import (
+from cfsig.evaluation.collections import (
     Collection,
     collection_from_index,
     compute_collection,
     evaluate_collections,
 )
-from cfsig.index import IndexReader
-from cfsig.measures import MEASURES, RetrievalReport, evaluate_distances
+from cfsig.evaluation.measures import MEASURES, RetrievalReport, evaluate_distances
+from cfsig.files.cla import read_cla
+from cfsig.files.demo import write_off
+from cfsig.index.store import IndexReader
 from cfsig.params import Params
-from cfsig.signature import signature_file
 from tests.helpers import icosphere, torus
 
 SHREC07_CLA = Path("/work/shared/data/shrec07.cla")

@@ -15,10 +15,10 @@ import trimesh
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
+from cfsig.descriptors.signature import compute_signature, signature_file
 from cfsig.errors import CfsigError
-from cfsig.mesh import parse_mesh
+from cfsig.files.mesh import parse_mesh
 from cfsig.params import Params
-from cfsig.signature import compute_signature, signature_file
 from tests.helpers import off_text
 
 # No input may make NumPy warn: numerical trouble is a repair or a typed error.

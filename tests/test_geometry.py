@@ -3,12 +3,13 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from cfsig import geometry
+from cfsig.files import elements
+from cfsig.operators import geometry
 from tests.helpers import disk, icosphere, open_cylinder, torus
 
 
 def _curvature(v, f):
-    lengths = geometry.edge_lengths(v, f)
+    lengths = elements.edge_lengths(v, f)
     boundary = geometry.boundary_vertices(f, geometry.cotan_laplacian(lengths, f, len(v)))
     return geometry.angle_defect(geometry.corner_angles(lengths), f, boundary)
 
@@ -26,7 +27,7 @@ def test_gauss_bonnet(mesh, chi):
 def test_boundary_curvature_is_pi_minus_angles():
     v, f = disk()
     k = _curvature(v, f)
-    lap = geometry.cotan_laplacian(geometry.edge_lengths(v, f), f, len(v))
+    lap = geometry.cotan_laplacian(elements.edge_lengths(v, f), f, len(v))
     boundary = geometry.boundary_vertices(f, lap)
     assert boundary.sum() == 32
     assert np.array_equal(np.flatnonzero(boundary), np.arange(len(v) - 32, len(v)))  # the rim
@@ -37,7 +38,7 @@ def test_boundary_curvature_is_pi_minus_angles():
 
 def test_matches_libigl_on_closed_mesh():
     v, f = torus()
-    lengths = geometry.edge_lengths(v, f)
+    lengths = elements.edge_lengths(v, f)
     ours = geometry.cotan_laplacian(lengths, f, len(v))
     assert abs(ours - igl.cotmatrix(v, f)).max() < 1e-12
     assert np.allclose(_curvature(v, f), igl.gaussian_curvature(v, f), atol=1e-12)
@@ -45,7 +46,7 @@ def test_matches_libigl_on_closed_mesh():
 
 def test_laplacian_constants_in_null_space_and_symmetric(sphere):
     v, f = sphere
-    lap = geometry.cotan_laplacian(geometry.edge_lengths(v, f), f, len(v))
+    lap = geometry.cotan_laplacian(elements.edge_lengths(v, f), f, len(v))
     assert np.abs(lap @ np.ones(len(v))).max() < 1e-12
     assert abs(lap - lap.T).max() < 1e-14
     x = np.random.default_rng(0).standard_normal(len(v))
@@ -56,7 +57,7 @@ def test_curvature_change_under_metric_scaling_is_minus_laplacian(sphere):
     # Scaling edge ij by exp(eps (u_i + u_j) / 2) changes the angle defects by -eps L u to
     # first order: the linearisation behind eq. (1) and the curvature error of section 3.4.
     v, f = sphere
-    lengths = geometry.edge_lengths(v, f)
+    lengths = elements.edge_lengths(v, f)
     u = np.random.default_rng(1).standard_normal(len(v))
     eps = 1e-6
     edge_u = u[f][:, [1, 2, 0]] + u[f][:, [2, 0, 1]]
@@ -74,20 +75,20 @@ def test_areas_match_cross_product(sphere):
     expected = 0.5 * np.linalg.norm(
         np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1
     )
-    assert np.allclose(geometry.face_areas(geometry.edge_lengths(v, f)), expected)
+    assert np.allclose(elements.face_areas(elements.edge_lengths(v, f)), expected)
     va = geometry.vertex_areas(expected, f, len(v))
     assert va.sum() == pytest.approx(expected.sum())
 
 
 def test_mollify_leaves_good_meshes_alone_and_fixes_degenerate(sphere):
     v, f = sphere
-    lengths = geometry.edge_lengths(v, f)
+    lengths = elements.edge_lengths(v, f)
     same, delta = geometry.mollify(lengths, 1e-5)
     assert delta == 0 and same is lengths
     flat = np.array([[1.0, 1.0, 2.0], [1.0, 2.0, 3.0]])  # zero-area triangles
     fixed, delta = geometry.mollify(flat, 1e-5)
     assert delta > 0
-    assert (geometry.face_areas(fixed) > 0).all()
+    assert (elements.face_areas(fixed) > 0).all()
     assert np.isfinite(geometry.corner_angles(fixed)).all()
 
 
@@ -96,11 +97,11 @@ def test_components_and_target_curvature():
     v2, f2 = torus(nu=12, nv=6)
     v = np.vstack([v1, v2 + 5])
     f = np.vstack([f1, f2 + len(v1)])
-    count, labels = geometry.components(geometry.edge_graph(f, len(v)))
+    count, labels = elements.components(elements.edge_graph(f, len(v)))
     assert count == 2
     k = _curvature(v, f)
-    lengths = geometry.edge_lengths(v, f)
-    va = geometry.vertex_areas(geometry.face_areas(lengths), f, len(v))
+    lengths = elements.edge_lengths(v, f)
+    va = geometry.vertex_areas(elements.face_areas(lengths), f, len(v))
     target = geometry.target_curvature(k, va, labels)
     for c in range(2):
         assert target[labels == c].sum() == pytest.approx(k[labels == c].sum(), abs=1e-9)
@@ -111,7 +112,7 @@ def test_components_and_target_curvature():
 
 def test_non_manifold_edges_are_counted():
     f = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
-    graph = geometry.edge_graph(f, 5)
+    graph = elements.edge_graph(f, 5)
     assert graph[0, 1] == graph[1, 0] == 3
     assert graph[0, 2] == graph[1, 2] == 1
     assert graph.nnz == 2 * 7
@@ -121,15 +122,15 @@ def test_laplacian_pattern_is_adjacency_plus_diagonal():
     # boundary_vertices counts neighbours on the pattern: every edge must be stored, even with
     # a weight of zero (here the squares' diagonals, opposite two right angles, nearly so).
     v, f = open_cylinder()
-    lap = geometry.cotan_laplacian(geometry.edge_lengths(v, f), f, len(v))
-    pattern = (geometry.edge_graph(f, len(v)) + sp.identity(len(v))).tocsc()
+    lap = geometry.cotan_laplacian(elements.edge_lengths(v, f), f, len(v))
+    pattern = (elements.edge_graph(f, len(v)) + sp.identity(len(v))).tocsc()
     assert np.array_equal(lap.indptr, pattern.indptr)
     assert np.array_equal(lap.indices, pattern.indices)
 
 
 def test_mesh_edges_groups_the_half_edges_of_each_edge():
     f = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4], [2, 1, 3]])  # edge 01 in three faces
-    edges = geometry.mesh_edges(f, 5)
+    edges = elements.mesh_edges(f, 5)
     assert edges.ends.tolist() == [[0, 1], [0, 2], [0, 3], [0, 4], [1, 2], [1, 3], [1, 4], [2, 3]]
     assert np.diff(edges.starts).tolist() == [3, 1, 1, 1, 2, 2, 1, 1]
     start, end = f.ravel(), f[:, [1, 2, 0]].ravel()  # half-edge 3f + j: corner j to j + 1
@@ -138,7 +139,7 @@ def test_mesh_edges_groups_the_half_edges_of_each_edge():
     assert np.array_equal(np.minimum(start, end)[half], edges.ends[edge_of, 0])
     assert np.array_equal(np.maximum(start, end)[half], edges.ends[edge_of, 1])
     assert np.array_equal(np.sort(half), np.arange(f.size))
-    none = geometry.mesh_edges(np.empty((0, 3), dtype=np.int64), 3)
+    none = elements.mesh_edges(np.empty((0, 3), dtype=np.int64), 3)
     assert none.ends.shape == (0, 2) and none.starts.tolist() == [0]
 
 
@@ -166,12 +167,12 @@ def test_laplacian_equals_a_plain_sparse_assembly(mesh):
         f = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
     else:
         v, f = mesh
-    lengths = geometry.edge_lengths(v, f)
+    lengths = elements.edge_lengths(v, f)
     ours = geometry.cotan_laplacian(lengths, f, len(v))
     reference = _reference_laplacian(lengths, f, len(v))
     assert ours.has_sorted_indices
     assert np.array_equal(ours.indptr, reference.indptr)
     assert np.array_equal(ours.indices, reference.indices)
     assert np.allclose(ours.data, reference.data, rtol=1e-12, atol=1e-12)
-    given = geometry.cotan_laplacian(lengths, f, len(v), edges=geometry.mesh_edges(f, len(v)))
+    given = geometry.cotan_laplacian(lengths, f, len(v), edges=elements.mesh_edges(f, len(v)))
     assert np.array_equal(given.data, ours.data)

@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 
 from cfsig.errors import IndexFileError
-from cfsig.index import Entry, IndexReader, IndexWriter
-from cfsig.nearest import l1_distances, nearest, search
+from cfsig.index.store import Entry, IndexReader, IndexWriter
 from cfsig.params import Params
+from cfsig.search.nearest import l1_distances, nearest, query
 from tests.helpers import build_index as _build
 from tests.helpers import random_signature as _sig
 
@@ -77,14 +77,14 @@ def test_bad_index_files(tmp_path, kind):
 
 
 def test_nearest_matches_brute_force(tmp_path, monkeypatch):
-    import cfsig.segments
+    import cfsig.index.segments
 
-    monkeypatch.setattr(cfsig.segments, "_CHUNK_ROWS", 7)  # several blocks
+    monkeypatch.setattr(cfsig.index.segments, "_CHUNK_ROWS", 7)  # several blocks
     hists = np.array(_build(tmp_path / "i.h5", 30))
     queries = np.array([_sig(100).vector, _sig(101).vector])
     with IndexReader(tmp_path / "i.h5") as r:
         rows, dist = nearest(r, queries, 5)
-        hits = search(r, queries[:1], 3)
+        hits = query(r, queries[:1], 3)
     brute = l1_distances(queries, hists)
     for q in range(2):
         assert list(rows[q]) == list(np.argsort(brute[q])[:5])

@@ -3,8 +3,8 @@ import pytest
 import trimesh
 
 from cfsig.errors import MeshError
-from cfsig.files import find_meshes
-from cfsig.mesh import clean_mesh, read_mesh
+from cfsig.files.folders import find_meshes
+from cfsig.files.mesh import clean_mesh, read_mesh
 from tests.helpers import icosphere, write_off
 
 

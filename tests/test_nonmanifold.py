@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from cfsig import geometry
-from cfsig.conformal import conformal_factor
-from cfsig.demo import capsule, limbed_body
-from cfsig.mesh import clean_mesh, split_nonmanifold
+from cfsig.descriptors.signature import compute_signature
+from cfsig.files import elements
+from cfsig.files.demo import capsule, limbed_body
+from cfsig.files.mesh import clean_mesh, split_nonmanifold
+from cfsig.operators.conformal import conformal_factor
 from cfsig.params import Params
-from cfsig.signature import compute_signature
 from tests.helpers import disk, icosphere, open_cylinder, signature_vector, torus
 from tests.helpers import l1 as _l1
 
@@ -61,7 +61,7 @@ def test_two_parts_touching_at_a_vertex_are_separated():
     assert not any("coincident" in r for r in mesh.repairs)  # they touch at one vertex only
     assert any("non-manifold" in r for r in mesh.repairs)
     assert len(mesh.vertices) == len(glued_v) + 1
-    assert geometry.components(geometry.edge_graph(mesh.faces, len(mesh.vertices)))[0] == 2
+    assert elements.components(elements.edge_graph(mesh.faces, len(mesh.vertices)))[0] == 2
     assert _l1(compute_signature(mesh, AS_READ).vector, _sig(*apart)) < 1e-12
 
 
@@ -80,10 +80,10 @@ def test_fin_on_an_edge(body, body_signature):
     tip = (v[a] + v[b]) / 2 + normal / np.linalg.norm(normal) * np.linalg.norm(v[b] - v[a])
     fin_v = np.vstack([v, tip])
     fin_f = np.vstack([f, [[a, b, len(v)]]])
-    _, counts = geometry.edge_face_counts(fin_f, len(fin_v))
+    _, counts = elements.edge_face_counts(fin_f, len(fin_v))
     assert counts.max() == 3  # really non-manifold
     mesh = clean_mesh(fin_v, fin_f)
-    _, counts = geometry.edge_face_counts(mesh.faces, len(mesh.vertices))
+    _, counts = elements.edge_face_counts(mesh.faces, len(mesh.vertices))
     assert counts.max() == 2
     fin_sig = compute_signature(mesh, Params()).vector
     assert np.isfinite(fin_sig).all()
@@ -108,7 +108,7 @@ def test_two_bodies_touching_at_a_vertex(body):
 def test_clean_mesh_keeps_the_edges_of_its_check_unless_it_splits():
     v, f = icosphere(2)
     mesh = clean_mesh(v, f)
-    assert np.array_equal(mesh.edges.ends, geometry.mesh_edges(f, len(v)).ends)
+    assert np.array_equal(mesh.edges.ends, elements.mesh_edges(f, len(v)).ends)
     pinched_f = np.vstack([f, [[0, len(v), len(v) + 1]]])
     pinched = clean_mesh(np.vstack([v, [[2.0, 0, 0], [2.0, 1, 0]]]), pinched_f)  # a flap at 0
     assert pinched.edges is None
@@ -123,7 +123,7 @@ def test_clean_mesh_keeps_the_edges_of_its_check_unless_it_splits():
 def test_inconsistent_orientation_is_not_split(shape, seed):
     v, f = shape
     flipped, flip = _flip_some(f, seed)
-    _, counts = geometry.edge_face_counts(flipped, len(v))
+    _, counts = elements.edge_face_counts(flipped, len(v))
     assert flip.any() and counts.max() == 2  # manifold, orientation inconsistent
     faces, copies = split_nonmanifold(flipped, len(v))
     assert faces is flipped and len(copies) == 0
@@ -147,7 +147,7 @@ def test_moebius_strip_is_not_split():
     assert len(copies) == 0
     mesh = clean_mesh(v, f)
     assert len(mesh.vertices) == len(v)
-    _, counts = geometry.edge_face_counts(mesh.faces, len(v))
+    _, counts = elements.edge_face_counts(mesh.faces, len(v))
     assert counts.max() == 2 and np.count_nonzero(counts == 1) == 2 * n_around  # one long loop
 
 
@@ -159,7 +159,7 @@ def test_inconsistent_orientation_keeps_the_genuine_splits(build, seed):
         expected = [0]
     else:
         v, f, expected = _finned_sphere()
-        assert geometry.edge_face_counts(f, len(v))[1].max() == 3
+        assert elements.edge_face_counts(f, len(v))[1].max() == 3
     faces, copies = split_nonmanifold(f, len(v))
     assert sorted(copies) == sorted(expected)
     flipped, flip = _flip_some(f, seed)

@@ -1,4 +1,4 @@
-"""Tests for cfsig.parts and evaluate_queries: partial queries against whole shapes."""
+"""Tests for cfsig.search.partial and evaluate_queries: partial queries against whole shapes."""
 
 import json
 
@@ -6,26 +6,26 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from cfsig import cfhks
 from cfsig.cli import main
+from cfsig.descriptors import intrinsic as cfhks
+from cfsig.descriptors.signature import compute_signature
 from cfsig.errors import PartialError
-from cfsig.index import IndexReader
-from cfsig.measures import evaluate_queries
-from cfsig.mesh import clean_mesh
+from cfsig.evaluation.measures import evaluate_queries
+from cfsig.files.mesh import clean_mesh
+from cfsig.index.store import IndexReader
 from cfsig.params import Params, signature_length
-from cfsig.parts import (
+from cfsig.search.partial import (
     HISTOGRAM_WEIGHT,
     SHARES,
     curvature_columns,
     partial_distances,
     partial_file,
     partial_scores,
-    partial_search,
     partial_vectors,
+    query_part,
     share_curvatures,
     share_queries,
 )
-from cfsig.signature import compute_signature
 from tests.helpers import icosphere, open_cylinder, torus, write_off
 
 CFHKS = Params(descriptor="cfhks")
@@ -132,7 +132,7 @@ def test_query_partial_finds_the_whole(wholes):
         assert [h["rank"] for h in hits] == list(range(1, len(hits) + 1))
         text = CliRunner().invoke(main, ["query", str(index), str(part), "--partial"]).output
         with IndexReader(index) as reader:
-            fit = partial_search(reader, partial_file(part, reader.params), 3)[1]
+            fit = query_part(reader, partial_file(part, reader.params), 3)[1]
         assert text.splitlines()[0] == f"# {part}  (partial distance {fit:.4f})" and fit > 0
         assert hits[0]["partial_distance"] == fit
         assert all("partial_distance" not in h for h in hits[1:])
@@ -170,7 +170,7 @@ def test_partial_search_scores_as_partial_distances(wholes):
         signatures = reader.signatures[:]
         for name in ("torus", "bumpy"):
             part = partial_file(root / "parts" / name / "cut.off", reader.params)
-            hits, distance = partial_search(reader, part, 3)
+            hits, distance = query_part(reader, part, 3)
             in_memory = partial_distances(part, signatures, reader.params, reader.cells())
             assert hits[0].entry.label == name
             assert distance == pytest.approx(in_memory.min(), rel=1e-5)

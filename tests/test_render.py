@@ -7,12 +7,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from cfsig import figures, raster
 from cfsig.cli import main
 from cfsig.errors import MissingDependencyError
-from cfsig.measures import evaluate_distances
-from cfsig.mesh import Mesh, clean_mesh, read_mesh
-from cfsig.report import write_report
+from cfsig.evaluation.measures import evaluate_distances
+from cfsig.figures import plots as figures
+from cfsig.figures import raster
+from cfsig.figures.report import write_report
+from cfsig.files.mesh import Mesh, clean_mesh, read_mesh
 from tests.helpers import icosphere, open_cylinder, random_rotation, torus, write_off
 
 matplotlib = pytest.importorskip("matplotlib")

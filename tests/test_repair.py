@@ -1,4 +1,4 @@
-"""The repair stage: every route of `cfsig.repair.repair_mesh` on generated meshes."""
+"""The repair stage: every route of `cfsig.repair.stage.repair_mesh` on generated meshes."""
 
 import json
 import subprocess
@@ -9,16 +9,16 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from cfsig import repair
 from cfsig.batch import compute_many
 from cfsig.cli import main
+from cfsig.descriptors.signature import compute_signature, signature_file
 from cfsig.errors import MeshError, StageLimitError
-from cfsig.geometry import mesh_edges
+from cfsig.files.elements import mesh_edges
+from cfsig.files.mesh import Mesh, clean_mesh
 from cfsig.isolate import Limits
-from cfsig.mesh import Mesh, clean_mesh
 from cfsig.params import Params
-from cfsig.repair import boundary_loops, repair_mesh
-from cfsig.signature import compute_signature, signature_file
+from cfsig.repair import stage as repair
+from cfsig.repair.stage import boundary_loops, repair_mesh
 from tests.helpers import icosphere, torus, write_off
 from tests.helpers import l1 as _l1
 
@@ -353,8 +353,8 @@ def test_proxy_past_its_memory_limit(tmp_path):
         "import igl  # loaded before the fork: what the limit meets is the stage itself\n"
         "from cfsig.errors import StageLimitError\n"
         "from cfsig.isolate import Limits\n"
-        "from cfsig.mesh import read_mesh\n"
-        "from cfsig.repair import repair_mesh\n"
+        "from cfsig.files.mesh import read_mesh\n"
+        "from cfsig.repair.stage import repair_mesh\n"
         "try:\n"
         f"    repair_mesh(read_mesh({str(path)!r}), 'proxy', Limits(memory_mb=64))\n"
         "except StageLimitError as exc:\n"

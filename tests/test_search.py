@@ -4,16 +4,16 @@ import h5py
 import numpy as np
 import pytest
 
-import cfsig.l1
-import cfsig.nearest
-import cfsig.segments
-from cfsig.blocks import plan_blocks, read_block, read_columns
+import cfsig.index.segments
+import cfsig.search.l1
+import cfsig.search.nearest
+from cfsig.descriptors.signature import Signature
 from cfsig.errors import IndexFileError
-from cfsig.index import Entry, IndexReader, IndexWriter
-from cfsig.l1 import choose_kernel, fast_kernel, l1_numpy
-from cfsig.nearest import nearest, search
+from cfsig.index.blocks import plan_blocks, read_block, read_columns
+from cfsig.index.store import Entry, IndexReader, IndexWriter
 from cfsig.params import Params
-from cfsig.signature import Signature
+from cfsig.search.l1 import choose_kernel, fast_kernel, l1_numpy
+from cfsig.search.nearest import nearest, query
 
 
 def _histograms(n, seed, bins=200):
@@ -35,7 +35,7 @@ def _brute_nearest(queries, rows, k):
 
 
 def _build(path, hists, chunk_rows, monkeypatch):
-    monkeypatch.setattr(cfsig.segments, "_CHUNK_ROWS", chunk_rows)
+    monkeypatch.setattr(cfsig.index.segments, "_CHUNK_ROWS", chunk_rows)
     phi = np.zeros(1)
     with IndexWriter(path, Params()) as w:
         for i, h in enumerate(hists):
@@ -57,13 +57,13 @@ def test_kernels_match_brute_force(n_queries, n_rows):
 def test_kernel_choice(monkeypatch):
     assert choose_kernel(10) is l1_numpy
     if fast_kernel() is not None:
-        assert choose_kernel(cfsig.l1.FAST_MIN_WORK) is fast_kernel()
-    monkeypatch.setattr(cfsig.l1, "fast_kernel", lambda: None)
+        assert choose_kernel(cfsig.search.l1.FAST_MIN_WORK) is fast_kernel()
+    monkeypatch.setattr(cfsig.search.l1, "fast_kernel", lambda: None)
     assert choose_kernel(10**12) is l1_numpy  # fallback when faiss is missing
 
 
 def test_faiss_kernel_refuses_a_strided_output():
-    kernel = pytest.importorskip("cfsig.l1_faiss").l1_rows
+    kernel = pytest.importorskip("cfsig.search.l1_faiss").l1_rows
     out = np.zeros((2, 10), np.float32)[:, :5]
     with pytest.raises(ValueError, match="contiguous"):
         kernel(_histograms(2, 1), _histograms(5, 2), out)
@@ -91,7 +91,7 @@ def test_ties_broken_by_row_whatever_the_block_order(tmp_path, monkeypatch, kern
     for row in (3, 10, 17, 40, 41):  # in four different chunks of 7 rows
         hists[row] = twin
     _build(tmp_path / "i.h5", hists, 7, monkeypatch)
-    monkeypatch.setattr(cfsig.nearest, "_threads", lambda: threads)
+    monkeypatch.setattr(cfsig.search.nearest, "_threads", lambda: threads)
     with IndexReader(tmp_path / "i.h5") as r:
         rows, dist = nearest(r, np.stack([twin, hists[0]]), 8)
     assert list(rows[0, :6]) == [3, 10, 17, 20, 40, 41]
@@ -104,7 +104,7 @@ def test_ties_broken_by_row_whatever_the_block_order(tmp_path, monkeypatch, kern
 def test_many_queries_in_small_groups(tmp_path, monkeypatch, kernel):
     hists, queries = _histograms(40, 6), _histograms(30, 7)
     _build(tmp_path / "i.h5", hists, 16, monkeypatch)
-    monkeypatch.setattr(cfsig.nearest, "_OUT_CELLS", 40)  # 2 queries per kernel call
+    monkeypatch.setattr(cfsig.search.nearest, "_OUT_CELLS", 40)  # 2 queries per kernel call
     with IndexReader(tmp_path / "i.h5") as r:
         rows, dist = nearest(r, queries, 5)
     want_rows, want_dist = _brute_nearest(queries, hists, 5)
@@ -143,7 +143,7 @@ def test_every_layout_gives_the_same_result(tmp_path, monkeypatch, layout):
     _build(path, hists, 7, monkeypatch)
     if LAYOUTS[layout] is not None:
         _relayout(path, **LAYOUTS[layout])
-    monkeypatch.setattr(cfsig.nearest, "_BLOCK_ROWS", 10)
+    monkeypatch.setattr(cfsig.search.nearest, "_BLOCK_ROWS", 10)
     with IndexReader(path) as r:
         data = r.segments[0].signatures
         blocks = plan_blocks(data, 10)
@@ -207,7 +207,7 @@ def test_empty_index_and_k_zero(tmp_path):
     with IndexReader(path) as r:
         rows, dist = nearest(r, _histograms(2, 9), 5)
         assert rows.shape == dist.shape == (2, 0)
-        assert search(r, _histograms(1, 9), 5) == [[]]
+        assert query(r, _histograms(1, 9), 5) == [[]]
 
 
 def test_nan_rows_rank_last(tmp_path, monkeypatch, kernel):

@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import cfsig.index
+import cfsig.index.store
 from cfsig.cli import main
 from cfsig.errors import IndexFileError
-from cfsig.index import Entry, IndexReader, IndexWriter, check_index, convert_index
-from cfsig.nearest import l1_distances, nearest
+from cfsig.index.store import Entry, IndexReader, IndexWriter, check_index, convert_index
 from cfsig.params import Params
+from cfsig.search.nearest import l1_distances, nearest
 from tests.helpers import random_signature
 
 
@@ -38,7 +38,7 @@ def _contents(index):
 
 
 def test_commits_append_segments_merge_and_supersede(tmp_path, monkeypatch):
-    monkeypatch.setattr(cfsig.index, "MERGE_FANOUT", 3)
+    monkeypatch.setattr(cfsig.index.store, "MERGE_FANOUT", 3)
     index, want = tmp_path / "i", {}
     with IndexWriter(index, Params()) as w:
         for c in range(10):  # one segment per commit, merged three at a time
@@ -120,7 +120,7 @@ def test_check_names_what_is_damaged(tmp_path, part, build_index):
 _WRITE = textwrap.dedent(
     """
     import sys
-    from cfsig.index import Entry, IndexWriter
+    from cfsig.index.store import Entry, IndexWriter
     from cfsig.params import Params
     from tests.helpers import random_signature
     index, what = sys.argv[1], sys.argv[2]
@@ -158,7 +158,7 @@ def _rows_now(index):
 
 def _merging(index):
     """Whether a writer is writing a segment that the manifest does not list yet."""
-    next_id = cfsig.index.read_manifest(index).next_id
+    next_id = cfsig.index.store.read_manifest(index).next_id
     return any(int(p.stem.split("-")[1]) >= next_id for p in index.glob("seg-*.h5"))
 
 
@@ -197,7 +197,7 @@ def test_sigkill_during_commits_and_compaction_loses_nothing(tmp_path):
 
 
 def _last(index):
-    return cfsig.index.read_manifest(index).segments[-1].id
+    return cfsig.index.store.read_manifest(index).segments[-1].id
 
 
 def _format_1(path, n):

@@ -5,15 +5,15 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
-from cfsig import geometry
-from cfsig.conformal import conformal_factor
-from cfsig.mesh import read_mesh
+from cfsig.files import elements
+from cfsig.files.mesh import read_mesh
+from cfsig.operators.conformal import conformal_factor
 
 
 def _mean_geodesic(mesh, sources=30):
     """Mean graph distance of every vertex to a fixed random set of vertices."""
     n = len(mesh.vertices)
-    edges, _ = geometry.edge_face_counts(mesh.faces, n)
+    edges, _ = elements.edge_face_counts(mesh.faces, n)
     w = np.linalg.norm(mesh.vertices[edges[:, 0]] - mesh.vertices[edges[:, 1]], axis=1)
     graph = sp.coo_matrix((w, (edges[:, 0], edges[:, 1])), shape=(n, n)).tocsr()
     picked = np.random.default_rng(0).choice(n, sources, replace=False)

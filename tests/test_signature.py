@@ -2,11 +2,11 @@ import igl
 import numpy as np
 import pytest
 
-from cfsig import geometry
-from cfsig.demo import limbed_body
-from cfsig.mesh import clean_mesh
+from cfsig.descriptors.signature import compute_signature, histogram, sample_phi
+from cfsig.files import elements
+from cfsig.files.demo import limbed_body
+from cfsig.files.mesh import clean_mesh
 from cfsig.params import Params
-from cfsig.signature import compute_signature, histogram, sample_phi
 from tests.helpers import l1 as _l1
 from tests.helpers import random_rotation
 from tests.helpers import signature_vector as _sig
@@ -72,7 +72,7 @@ def test_noise_keeps_signature_close(body, reference):
     # paper section 3.2: Gaussian noise of 20% of the mean edge length
     sig, other = reference
     v, f = body
-    sigma = 0.2 * geometry.edge_lengths(v, f).mean()
+    sigma = 0.2 * elements.edge_lengths(v, f).mean()
     noisy = v + np.random.default_rng(0).normal(scale=sigma, size=v.shape)
     assert _l1(_sig(noisy, f), sig) < 0.2 * other
 

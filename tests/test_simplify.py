@@ -1,8 +1,8 @@
 import numpy as np
 
-from cfsig.geometry import mesh_edges
-from cfsig.mesh import clean_mesh
-from cfsig.simplify import decimate, simplified_mesh
+from cfsig.files.elements import mesh_edges
+from cfsig.files.mesh import clean_mesh
+from cfsig.repair.simplify import decimate, simplified_mesh
 from tests.helpers import icosphere
 
 

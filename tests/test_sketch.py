@@ -9,15 +9,12 @@ import h5py
 import numpy as np
 import pytest
 
-import cfsig.index
-import cfsig.nearest
-import cfsig.segments
+import cfsig.index.segments
+import cfsig.index.store
+import cfsig.search.nearest
+from cfsig.descriptors.signature import Signature
 from cfsig.errors import IndexFileError
-from cfsig.index import Entry, IndexReader, IndexWriter, check_index, compact_index, file_crc
-from cfsig.nearest import nearest
-from cfsig.params import Params, curvature_slice, signature_length
-from cfsig.signature import Signature
-from cfsig.sketch import (
+from cfsig.index.sketch import (
     Sketch,
     adjust_bounds,
     group_sums,
@@ -27,6 +24,9 @@ from cfsig.sketch import (
     sketch_rows,
     threshold,
 )
+from cfsig.index.store import Entry, IndexReader, IndexWriter, check_index, compact_index, file_crc
+from cfsig.params import Params, curvature_slice, signature_length
+from cfsig.search.nearest import nearest
 
 CFHKS = Params(descriptor="cfhks")
 WIDTH = signature_length(CFHKS)
@@ -65,23 +65,23 @@ def _write(index, rows, names, seed=0):
 def small_blocks(monkeypatch):
     """Chunks of 64 rows and sketch chunks of 96, so that a few hundred rows make many blocks;
     and pruning from any size, with few rows evaluated first."""
-    monkeypatch.setattr(cfsig.segments, "_CHUNK_ROWS", 64)
-    monkeypatch.setattr(cfsig.segments, "_SKETCH_CHUNK_ROWS", 96)
-    monkeypatch.setattr(cfsig.nearest, "PRUNE_MIN_ROWS", 0)
-    monkeypatch.setattr(cfsig.nearest, "_FIRST", 8)
-    monkeypatch.setattr(cfsig.nearest, "_SAMPLE", 50)
+    monkeypatch.setattr(cfsig.index.segments, "_CHUNK_ROWS", 64)
+    monkeypatch.setattr(cfsig.index.segments, "_SKETCH_CHUNK_ROWS", 96)
+    monkeypatch.setattr(cfsig.search.nearest, "PRUNE_MIN_ROWS", 0)
+    monkeypatch.setattr(cfsig.search.nearest, "_FIRST", 8)
+    monkeypatch.setattr(cfsig.search.nearest, "_SAMPLE", 50)
 
 
 def _both(reader, queries, k, monkeypatch):
     """nearest() pruned and by the full scan, and how many full scans the pruned one made."""
     scans = []
-    real = cfsig.nearest._scan
-    monkeypatch.setattr(cfsig.nearest, "_scan", lambda *a: scans.append(1) or real(*a))
+    real = cfsig.search.nearest._scan
+    monkeypatch.setattr(cfsig.search.nearest, "_scan", lambda *a: scans.append(1) or real(*a))
     pruned = nearest(reader, queries, k)
     scanned = len(scans)
-    monkeypatch.setattr(cfsig.nearest, "PRUNE_MIN_ROWS", 10**12)
+    monkeypatch.setattr(cfsig.search.nearest, "PRUNE_MIN_ROWS", 10**12)
     full = nearest(reader, queries, k)
-    monkeypatch.setattr(cfsig.nearest, "PRUNE_MIN_ROWS", 0)
+    monkeypatch.setattr(cfsig.search.nearest, "PRUNE_MIN_ROWS", 0)
     return pruned, full, scanned
 
 
@@ -118,7 +118,9 @@ def test_many_queries_in_groups_and_a_segment_without_sketches(tmp_path, monkeyp
     _write(index, rows[:300], [f"a/{i}.off" for i in range(300)])
     _strip_sketches(index)  # as code from before sketches wrote it
     _write(index, rows[300:], [f"b/{i}.off" for i in range(300)])
-    monkeypatch.setattr(cfsig.nearest, "_BOUND_CELLS", 1300)  # two queries per scan of sketches
+    monkeypatch.setattr(
+        cfsig.search.nearest, "_BOUND_CELLS", 1300
+    )  # two queries per scan of sketches
     with IndexReader(index) as r:
         assert [v.sketch is None for v in r.segments] == [True, False]
         (rows_p, dist_p), (rows_f, dist_f), _ = _both(r, queries, 9, monkeypatch)
@@ -133,24 +135,24 @@ def test_many_queries_in_groups_and_a_segment_without_sketches(tmp_path, monkeyp
 
 def _strip_sketches(index):
     """Remove the sketches of an index's last segment, and record its new checksum."""
-    _strip(index, ("sketch", *cfsig.segments.SKETCH_EXTRA))
+    _strip(index, ("sketch", *cfsig.index.segments.SKETCH_EXTRA))
 
 
 def _strip_copy(index):
     """Remove the curvature copy of an index's last segment, and record its new checksum."""
-    _strip(index, ("curvature", *cfsig.segments.CURVATURE_EXTRA))
+    _strip(index, ("curvature", *cfsig.index.segments.CURVATURE_EXTRA))
 
 
 def _strip(index, keys):
     """Remove some datasets of an index's last segment, as code from before them wrote it."""
-    manifest = cfsig.index.read_manifest(index)
+    manifest = cfsig.index.store.read_manifest(index)
     last = manifest.segments[-1]
     with h5py.File(index / last.file, "r+") as f:
         for key in keys:
             del f[key]
             del f.attrs[f"crc32_{key}"]
     segments = (*manifest.segments[:-1], replace(last, crc32=file_crc(index / last.file)))
-    cfsig.index.write_manifest(index, replace(manifest, segments=segments))
+    cfsig.index.store.write_manifest(index, replace(manifest, segments=segments))
 
 
 def test_bounds_are_lower_bounds_whatever_the_rounding():
@@ -237,9 +239,11 @@ def test_a_search_of_the_curvature_reads_the_copy(tmp_path, monkeypatch, small_b
         index, rows[150:] + 0.5, [f"a/{i}.off" for i in range(20)] + [f"b/{i}" for i in range(130)]
     )
     read = []
-    real = cfsig.nearest.read_columns
+    real = cfsig.search.nearest.read_columns
     monkeypatch.setattr(
-        cfsig.nearest, "read_columns", lambda d, *a: read.append(d.file.filename) or real(d, *a)
+        cfsig.search.nearest,
+        "read_columns",
+        lambda d, *a: read.append(d.file.filename) or real(d, *a),
     )
     with IndexReader(index) as r:
         first, second = r.segments
@@ -247,7 +251,7 @@ def test_a_search_of_the_curvature_reads_the_copy(tmp_path, monkeypatch, small_b
         assert np.array_equal(second.curvature.rows[:], second.signatures[:, columns])
         got_rows, got = nearest(r, queries[:, columns], 9, columns)
         stored = r.signatures[:]
-    manifest = cfsig.index.read_manifest(index)
+    manifest = cfsig.index.store.read_manifest(index)
     assert set(read) == {str(index / manifest.segments[0].file)}  # rows only where no copy
     brute = np.abs(queries[:, None, columns] - stored[None, :, columns]).sum(axis=2)
     assert np.allclose(got, np.sort(brute, axis=1)[:, :9], rtol=1e-5)

@@ -2,9 +2,9 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from cfsig.conformal import conformal_factor
-from cfsig.mesh import clean_mesh
-from cfsig.spectrum import heat_kernel_signature, lanczos, laplace_spectrum
+from cfsig.files.mesh import clean_mesh
+from cfsig.operators.conformal import conformal_factor
+from cfsig.operators.spectrum import heat_kernel_signature, lanczos, laplace_spectrum
 from tests.helpers import icosphere, random_rotation, torus
 
 

@@ -3,7 +3,7 @@
 Layout (format version 2, docs/index-format.md): ``INDEX/manifest.h5`` holds the header
 (``format`` "cfsig-index", ``format_version``, ``params`` as JSON, ``cfsig_version``) and the
 list of segments with their row counts and file checksums; each ``INDEX/seg-NNNNNNNN.h5``
-(`cfsig.segments`) holds the rows of one commit, or of several merged by compaction. A commit
+(`cfsig.index.segments`) holds the rows of one commit, or of several merged by compaction. A commit
 writes one new segment, syncs it to disk and renames a new manifest over the old one: it costs
 the rows it adds, whatever the size of the index. A name added again supersedes its older row,
 which readers skip until compaction drops it. Segments pile up and are merged eight at a time
@@ -34,10 +34,9 @@ from typing import IO, TYPE_CHECKING
 import h5py
 import numpy as np
 
-from . import __version__
-from .errors import IndexFileError
-from .params import Params, cell_slots, curvature_slice, signature_length
-from .segments import (
+from cfsig import __version__
+from cfsig.errors import IndexFileError
+from cfsig.index.segments import (
     CELLS,
     COLUMNS,
     CURVATURE_EXTRA,
@@ -51,10 +50,11 @@ from .segments import (
     scan_segment,
     write_segment,
 )
-from .sketch import Sketch
+from cfsig.index.sketch import Sketch
+from cfsig.params import Params, cell_slots, curvature_slice, signature_length
 
 if TYPE_CHECKING:  # importing the signature code would load scipy on the query path
-    from .signature import Signature
+    from cfsig.descriptors.signature import Signature
 
 FORMAT = "cfsig-index"
 FORMAT_VERSION = 2
@@ -150,7 +150,7 @@ class SegmentView:
         written before the copy existed, or a format-1 file.
     cells : (h5py.Dataset, h5py.Dataset) or None
         The fine curvature cells of its rows, (rows, slots) uint16, and their fractions,
-        (rows, slots) float32 (`cfsig.cells.packed_cells`); None for a descriptor that keeps
+        (rows, slots) float32 (`cfsig.descriptors.cells.packed_cells`); None for a descriptor that keeps
         none.
     """
 
@@ -349,7 +349,7 @@ class IndexReader:
         Returns
         -------
         cells : ((N, slots) uint16, (N, slots) float32) or None
-            `cfsig.cells.packed_cells` of each row; None when the index's descriptor keeps none.
+            `cfsig.descriptors.cells.packed_cells` of each row; None when the index's descriptor keeps none.
         """
         slots = cell_slots(self.params)
         if slots is None:

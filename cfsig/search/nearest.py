@@ -18,10 +18,10 @@ from typing import TypeVar
 import h5py
 import numpy as np
 
-from .blocks import Block, plan_blocks, read_block, read_columns, read_rows
-from .index import Entry, IndexReader, SegmentView
-from .l1 import Kernel, choose_kernel
-from .sketch import adjust_bounds, query_sketches, threshold
+from cfsig.index.blocks import Block, plan_blocks, read_block, read_columns, read_rows
+from cfsig.index.sketch import adjust_bounds, query_sketches, threshold
+from cfsig.index.store import Entry, IndexReader, SegmentView
+from cfsig.search.l1 import Kernel, choose_kernel
 
 _BLOCK_ROWS = 16384  # rows per block of a dataset that is not chunked
 _OUT_CELLS = 1 << 20  # distances computed per kernel call (4 MB): bounds memory for many queries
@@ -84,7 +84,7 @@ def nearest(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The k nearest indexed signatures of each query, exactly, pruning by sketches.
 
-    Segments with sketches (`cfsig.sketch`), once they hold `PRUNE_MIN_ROWS` rows or more, are
+    Segments with sketches (`cfsig.index.sketch`), once they hold `PRUNE_MIN_ROWS` rows or more, are
     searched in two steps per query: the sketches give a lower bound of every row's distance,
     and exact distances are computed only for rows whose bound does not exceed the k-th best
     distance found so far; the bounds account for every rounding, so the result is the one a
@@ -109,7 +109,7 @@ def nearest(
     score : callable, optional
         Rank by ``score(distances)`` instead: it maps the L1 distances (q, m) float32 of all
         queries to some m rows to one score per row (m,), smallest best
-        (`cfsig.parts.partial_scores`).
+        (`cfsig.search.partial.partial_scores`).
 
     Returns
     -------
@@ -331,7 +331,7 @@ class _Pruned:
                     self.best.merge_rows(j, picked, dist[0])
 
 
-def search(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[Hit]]:
+def query(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[Hit]]:
     """The k nearest indexed meshes of each query, with their names and labels.
 
     Parameters

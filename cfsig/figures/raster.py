@@ -1,7 +1,7 @@
 """The rasteriser: meshes drawn lit and shaded, coloured by a value per vertex or plain clay.
 
 A small z-buffer in numpy: orthographic view, per-pixel interpolation of the value and of the
-vertex normals, Lambert shading, 2x2 supersampling. It returns RGBA arrays; `cfsig.figures` lays
+vertex normals, Lambert shading, 2x2 supersampling. It returns RGBA arrays; `cfsig.figures.plots` lays
 them out in pictures. Same input, same pixels: nothing depends on the time, the display or the
 random state.
 """
@@ -12,9 +12,9 @@ from types import ModuleType
 
 import numpy as np
 
-from .errors import MissingDependencyError
-from .geometry import components, edge_graph
-from .mesh import Mesh
+from cfsig.errors import MissingDependencyError
+from cfsig.files.elements import components, edge_graph
+from cfsig.files.mesh import Mesh
 
 CMAP = "turbo"
 LIGHT = np.array([-0.4, 0.5, 1.0]) / np.linalg.norm([-0.4, 0.5, 1.0])

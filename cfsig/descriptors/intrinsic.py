@@ -14,7 +14,7 @@ was chosen):
   distribution of ``log(area * h_t(x))`` over the surface, h the heat kernel signature;
   1-Wasserstein distance per time.
 - ``curvature``: for each scale ``s`` of the version's ``scales``, the area-weighted histogram
-  of the angle defect smoothed by heat diffusion for ``s * area`` (`cfsig.curvature`) on the
+  of the angle defect smoothed by heat diffusion for ``s * area`` (`cfsig.operators.curvature`) on the
   mesh (from version 7: on its simplified copy), on ``asinh(value / 10)`` in the version's
   ``bins`` (from version 9: the joint histograms of adjacent scales, near their diagonal);
   L1 distance per histogram. It needs no eigenproblem, only conjugate gradients.
@@ -34,7 +34,7 @@ Versions (`Params.version`; an index stores its own, and a query recomputes with
 3. Version 2 plus curvature at four scales (0.0000156 to 0.001, quadrupling), weighed like
    all of version 2 together, chosen on SHREC 2007 and FAUST (McGill held out).
 4. Version 3 with the spectrum and the heat kernel signature computed on a copy of the mesh
-   simplified to ``coarse`` faces (`cfsig.simplify`), at a fraction of the eigenproblem's cost;
+   simplified to ``coarse`` faces (`cfsig.repair.simplify`), at a fraction of the eigenproblem's cost;
    phi and the curvature stay on the full mesh, bit for bit version 3's.
 5. Version 4 for less work: the curvature's conjugate gradients stopped at 1e-5, in 49 bins.
 6. Version 5 with the curvature's conjugate gradients stopped at 1e-3.
@@ -43,7 +43,7 @@ Versions (`Params.version`; an index stores its own, and a query recomputes with
    scales at which vertex noise no longer moves it; divisors from SHREC 2007's and FAUST's pairs.
 8. Version 7 with 45 eigenpairs, at three quarters of its eigenproblem's cost.
 9. Version 8 with the curvature channel as joint histograms of adjacent scales, near their
-   diagonal: what a part keeps of its whole, for partial queries (`cfsig.parts`).
+   diagonal: what a part keeps of its whole, for partial queries (`cfsig.search.partial`).
 
 Only version 1's vector holds phi, so only version 1 solves for it (`solves_phi`); the others
 factorise the Laplacian of the mesh, or of its copy, for the spectrum alone.
@@ -56,13 +56,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .cells import Cells, curvature_bins, packed_cells
-from .conformal import ConformalFactor, Operators, laplacian_solver, operators
-from .curvature import CG_TOLERANCE, smoothed_curvature
-from .errors import SolverError
-from .mesh import Mesh
-from .simplify import simplified_mesh
-from .spectrum import Spectrum, heat_kernel_signature, laplace_spectrum
+from cfsig.descriptors.cells import Cells, curvature_bins, packed_cells
+from cfsig.errors import SolverError
+from cfsig.files.mesh import Mesh
+from cfsig.operators.conformal import ConformalFactor, Operators, laplacian_solver, operators
+from cfsig.operators.curvature import CG_TOLERANCE, smoothed_curvature
+from cfsig.operators.spectrum import Spectrum, heat_kernel_signature, laplace_spectrum
+from cfsig.repair.simplify import simplified_mesh
 
 QUANTILES = 64
 EIGENPAIRS = 30
@@ -97,12 +97,12 @@ class Design:
         bins of the diagonal (`curvature_histograms`); None: a histogram per scale.
     fine : (int, int) or None
         Bins and band of the fine cells of all the curvature scales jointly, kept beside the
-        vector for partial queries (`cfsig.cells.packed_cells`); None keeps none.
+        vector for partial queries (`cfsig.descriptors.cells.packed_cells`); None keeps none.
     tolerance : float
         Relative residual of the curvature's conjugate gradients.
     predict : bool
         Factorise the curvature's larger scales at once when the conjugate gradients would
-        not solve them cheaply (`cfsig.curvature.smoothed_curvature`).
+        not solve them cheaply (`cfsig.operators.curvature.smoothed_curvature`).
     eigenpairs : int
         Eigenpairs of the spectrum, from which the heat kernel signature is also computed.
     curvature_on_copy : bool
@@ -232,7 +232,7 @@ def curvature_histograms(
 ) -> np.ndarray:
     """Histograms of curvature at scales, the ``curvature`` channel.
 
-    Each vertex falls in its bin of `cfsig.cells.curvature_bins`. Without ``band``, one
+    Each vertex falls in its bin of `cfsig.descriptors.cells.curvature_bins`. Without ``band``, one
     histogram per scale; with it, one joint histogram per pair of adjacent scales: where a
     vertex's curvature lies at one scale and at the next, which the per-scale histograms
     forget, the second scale's bin taken relative to the first's and clipped to within
@@ -242,7 +242,7 @@ def curvature_histograms(
     Parameters
     ----------
     values : (n, k) float64
-        `cfsig.curvature.smoothed_curvature` at k scales, dimensionless.
+        `cfsig.operators.curvature.smoothed_curvature` at k scales, dimensionless.
     weights : (n,) float64
         Non-negative vertex weights (areas) with a positive sum.
     bins : int
@@ -296,7 +296,7 @@ def channels(
     ----------
     ops : Operators
         The operators on which the curvature channel is computed: the mesh's
-        (`cfsig.conformal.operators`), or its simplified copy's (`Design.curvature_on_copy`).
+        (`cfsig.operators.conformal.operators`), or its simplified copy's (`Design.curvature_on_copy`).
     spectrum : Spectrum
         Its low spectrum, or its simplified copy's (`spectrum_of`), with ``design.eigenpairs``
         pairs.
@@ -312,7 +312,7 @@ def channels(
         eigenvalues repeats its largest. ``"heat"``: (len(times), QUANTILES) quantiles of
         ``log(area * h_t)``. ``"curvature"``: `curvature_histograms` of `curvature_shape`.
         ``"phi"``: (QUANTILES,) quantiles of phi, dimensionless, when ``phi`` is given.
-        ``"cells"`` and ``"cell_fractions"``: `cfsig.cells.packed_cells` of the curvature, when
+        ``"cells"`` and ``"cell_fractions"``: `cfsig.descriptors.cells.packed_cells` of the curvature, when
         the design keeps them (``design.fine``).
 
     Raises
@@ -356,7 +356,7 @@ def spectrum_of(
     ops : Operators
         The mesh's operators.
     coarse : Mesh or None
-        A simplified copy (`cfsig.simplify.simplified_mesh`), solved with its own
+        A simplified copy (`cfsig.repair.simplify.simplified_mesh`), solved with its own
         factorisation; None, or a copy that cannot be solved, takes the mesh itself.
     solve : callable or None
         The mesh's factorised Laplacian when it is known (`ConformalFactor.solve`); None
@@ -493,7 +493,7 @@ def cfhks_vector(
         The mesh, simplified for the spectrum (and, from version 7, every channel: `copy_vector`)
         when the version has a ``coarse`` copy.
     ops : Operators
-        Its operators (`cfsig.conformal.operators`), for the channels not on the copy.
+        Its operators (`cfsig.operators.conformal.operators`), for the channels not on the copy.
     version : int
         A key of `DESIGNS`.
     cf : ConformalFactor or None
@@ -507,7 +507,7 @@ def cfhks_vector(
     vector : (DESIGNS[version].length,) float64
         See `weigh`.
     cells : Cells or None
-        `cfsig.cells.packed_cells` of its curvature, for the versions with ``fine`` cells.
+        `cfsig.descriptors.cells.packed_cells` of its curvature, for the versions with ``fine`` cells.
 
     Raises
     ------

@@ -2,7 +2,7 @@
 
 The conformal factor is defined on a closed manifold (paper section 2); on a model made of
 separate parts it is solved per part, and each part gets an unrelated distribution (the paper's
-"most important drawback", section 4). `repair_mesh` runs between reading (`cfsig.mesh`, which
+"most important drawback", section 4). `repair_mesh` runs between reading (`cfsig.files.mesh`, which
 always welds, drops duplicates and degenerate faces and splits non-manifold vertices) and the
 numerics, and chooses one of three routes (docs/method.md, section 1b):
 
@@ -25,12 +25,12 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from .errors import MeshError
-from .geometry import Edges, edge_lengths, face_areas, mesh_edges
-from .isolate import Limits, run_limited
-from .mesh import Mesh, clean_mesh
-from .params import REPAIR_MODES
-from .simplify import decimate
+from cfsig.errors import MeshError
+from cfsig.files.elements import Edges, edge_lengths, face_areas, mesh_edges
+from cfsig.files.mesh import Mesh, clean_mesh
+from cfsig.isolate import Limits, run_limited
+from cfsig.params import REPAIR_MODES
+from cfsig.repair.simplify import decimate
 
 # Boundary vertices of different parts closer than this fraction of the bounding-box diagonal
 # are stitched together.
@@ -55,7 +55,7 @@ def repair_mesh(mesh: Mesh, mode: str = "auto", limits: Limits | None = None) ->
     Parameters
     ----------
     mesh : Mesh
-        A checked mesh, as `cfsig.mesh.clean_mesh` returns.
+        A checked mesh, as `cfsig.files.mesh.clean_mesh` returns.
     mode : {"auto", "off", "proxy"}
         ``"auto"``: the first route that applies (module docstring); ``"off"``: the mesh as
         read, solved per component; ``"proxy"``: the proxy for anything but a clean mesh.
@@ -190,7 +190,7 @@ def stitch(
     faces : (m, 3) int64
         Triangles with at most two faces per edge and one fan per vertex.
     edges : geometry.Edges or None
-        The faces' `geometry.mesh_edges` when already known (`clean_mesh` keeps them).
+        The faces' `cfsig.files.elements.mesh_edges` when already known (`clean_mesh` keeps them).
     distance : float
         Largest distance between two vertices to merge, in length units.
 
@@ -288,7 +288,7 @@ def drop_fragments(
     faces : (m, 3) int64
         Triangles.
     edges : geometry.Edges or None
-        The faces' `geometry.mesh_edges` when already known (`clean_mesh` keeps them).
+        The faces' `cfsig.files.elements.mesh_edges` when already known (`clean_mesh` keeps them).
     fraction : float
         Area fraction below which an open part is dropped.
 
@@ -325,7 +325,7 @@ def fill_holes(
         Triangles with at most two faces per edge and one fan per vertex (`clean_mesh`), so
         that every boundary vertex has exactly two boundary edges.
     edges : geometry.Edges or None
-        The faces' `geometry.mesh_edges` when already known (`clean_mesh` keeps them).
+        The faces' `cfsig.files.elements.mesh_edges` when already known (`clean_mesh` keeps them).
 
     Returns
     -------
@@ -412,7 +412,7 @@ def drop_enclosed(
     faces : (m, 3) int64
         Triangles.
     edges : geometry.Edges or None
-        The faces' `geometry.mesh_edges` when already known (`clean_mesh` keeps them).
+        The faces' `cfsig.files.elements.mesh_edges` when already known (`clean_mesh` keeps them).
 
     Returns
     -------

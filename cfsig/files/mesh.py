@@ -12,9 +12,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from .errors import MeshError, MissingDependencyError
-from .files import MESH_SUFFIXES
-from .geometry import Edges, mesh_edges
+from cfsig.errors import MeshError, MissingDependencyError
+from cfsig.files.elements import Edges, mesh_edges
+from cfsig.files.folders import MESH_SUFFIXES
 
 # The Laplacian and the curvature take products of up to four lengths, which end float64 near
 # 1e+-77: larger coordinates overflow, a smaller span underflows. The bounds keep a wide margin;
@@ -36,13 +36,13 @@ class Mesh:
     repairs : tuple of str
         What was repaired on reading, in words (empty for a clean mesh).
     edges : geometry.Edges or None
-        The faces' `geometry.mesh_edges`, kept from the non-manifold check of `clean_mesh` so
+        The faces' `cfsig.files.elements.mesh_edges`, kept from the non-manifold check of `clean_mesh` so
         that the Laplacian need not sort the half-edges again; None when not known.
     route : str
-        Which route of `cfsig.repair.repair_mesh` the mesh took: ``"clean"`` (one closed
+        Which route of `cfsig.repair.stage.repair_mesh` the mesh took: ``"clean"`` (one closed
         manifold, as read), ``"repaired"``, ``"proxy"`` or ``"unrepaired"``.
     parts : (n,) int or None
-        Connected component of each vertex, numbered as `geometry.components` numbers them,
+        Connected component of each vertex, numbered as `cfsig.files.elements.components` numbers them,
         kept from the repair stage's check so that the solve need not find them again; None
         when not known.
     """
@@ -245,7 +245,7 @@ def split_nonmanifold(
     n_vertices : int
         Number of vertices n.
     edges : geometry.Edges, optional
-        The faces' `geometry.mesh_edges`, when already known.
+        The faces' `cfsig.files.elements.mesh_edges`, when already known.
 
     Returns
     -------

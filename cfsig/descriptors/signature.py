@@ -15,14 +15,20 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .cells import Cells
-from .cfhks import cfhks_vector, copy_vector, solves_phi
-from .conformal import ConformalFactor, Operators, conformal_factor, mesh_components, operators
-from .errors import MeshError, SolverError
-from .isolate import Limits
-from .mesh import Mesh, parse_mesh, read_bytes
-from .params import Params
-from .repair import repair_mesh
+from cfsig.descriptors.cells import Cells
+from cfsig.descriptors.intrinsic import cfhks_vector, copy_vector, solves_phi
+from cfsig.errors import MeshError, SolverError
+from cfsig.files.mesh import Mesh, parse_mesh, read_bytes
+from cfsig.isolate import Limits
+from cfsig.operators.conformal import (
+    ConformalFactor,
+    Operators,
+    conformal_factor,
+    mesh_components,
+    operators,
+)
+from cfsig.params import Params
+from cfsig.repair.stage import repair_mesh
 
 
 @dataclass(frozen=True)
@@ -43,7 +49,7 @@ class Signature:
     repairs : tuple of str
         Repairs made on reading and by the repair stage, in words.
     route : str
-        The repair stage's route (`cfsig.repair.repair_mesh`): ``"clean"``, ``"repaired"``,
+        The repair stage's route (`cfsig.repair.stage.repair_mesh`): ``"clean"``, ``"repaired"``,
         ``"proxy"`` or ``"unrepaired"``.
     seconds : float
         Wall time from reading to histogram.
@@ -51,7 +57,7 @@ class Signature:
         Hash of the file's bytes ("" for an in-memory mesh).
     cells : Cells or None
         The fine curvature cells kept beside the vector for partial queries
-        (`cfsig.cells.packed_cells`), by ``cfhks`` version 10 and later; None otherwise.
+        (`cfsig.descriptors.cells.packed_cells`), by ``cfhks`` version 10 and later; None otherwise.
     """
 
     vector: np.ndarray
@@ -232,7 +238,7 @@ def compute_signature(
     ----------
     mesh : Mesh
         A checked mesh, as `read_mesh` or `clean_mesh` return; it goes through
-        `cfsig.repair.repair_mesh` with ``params.repair`` first.
+        `cfsig.repair.stage.repair_mesh` with ``params.repair`` first.
     params : Params
         Signature parameters.
     solver : {"auto", "cholmod", "eigen", "scipy"}
@@ -249,7 +255,7 @@ def compute_signature(
     Raises
     ------
     MeshError
-        The repair stage failed (`cfsig.repair.repair_mesh`).
+        The repair stage failed (`cfsig.repair.stage.repair_mesh`).
     SolverError, MissingDependencyError
         As `conformal_factor` and `signature_of`.
     """

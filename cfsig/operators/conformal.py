@@ -9,10 +9,11 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from . import geometry
-from .errors import MissingDependencyError, SolverError
-from .mesh import Mesh
-from .params import SOLVERS
+from cfsig.errors import MissingDependencyError, SolverError
+from cfsig.files import elements
+from cfsig.files.mesh import Mesh
+from cfsig.operators import geometry
+from cfsig.params import SOLVERS
 
 # The order "auto" tries the backends in: fastest first, as measured by benchmarks/solvers.py.
 _PREFERENCE = ("cholmod", "eigen", "scipy")
@@ -99,8 +100,8 @@ def operators(mesh: Mesh, mollify: float = 1e-5) -> Operators:
     ops : Operators
     """
     n, faces = len(mesh.vertices), mesh.faces
-    lengths, delta = geometry.mollify(geometry.edge_lengths(mesh.vertices, faces), mollify)
-    areas = geometry.face_areas(lengths)
+    lengths, delta = geometry.mollify(elements.edge_lengths(mesh.vertices, faces), mollify)
+    areas = elements.face_areas(lengths)
     laplacian = geometry.cotan_laplacian(lengths, faces, n, areas, mesh.edges)
     boundary = geometry.boundary_vertices(faces, laplacian)
     curvature = geometry.angle_defect(geometry.corner_angles(lengths), faces, boundary)
@@ -134,8 +135,8 @@ def mesh_components(mesh: Mesh, graph: sp.spmatrix | None = None) -> tuple[int, 
     if mesh.parts is not None:
         return int(mesh.parts.max()) + 1, mesh.parts
     if graph is None:
-        graph = geometry.edge_graph(mesh.faces, len(mesh.vertices))
-    return geometry.components(graph)
+        graph = elements.edge_graph(mesh.faces, len(mesh.vertices))
+    return elements.components(graph)
 
 
 def conformal_factor(mesh: Mesh, mollify: float = 1e-5, solver: str = "auto") -> ConformalFactor:
@@ -267,7 +268,7 @@ def laplacian_solver(
     to 0 and the remaining symmetric positive definite system ``-L' x' = -rhs'`` is factorised;
     ``rhs`` must sum to zero on every component, so that the pinned equation is implied by the
     others. Neither the right-hand side nor the solution is checked, and no mean is subtracted:
-    the Lanczos iteration of `cfsig.spectrum.laplace_spectrum`, about 150 solves, projects the
+    the Lanczos iteration of `cfsig.operators.spectrum.laplace_spectrum`, about 150 solves, projects the
     constants out itself and checks its eigenvalues once (`factorize_laplacian` checks).
 
     Parameters

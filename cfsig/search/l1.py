@@ -52,7 +52,7 @@ def fast_kernel() -> Kernel | None:
     kernel : callable or None
     """
     try:
-        return importlib.import_module("cfsig.l1_faiss").l1_rows
+        return importlib.import_module("cfsig.search.l1_faiss").l1_rows
     except ImportError:
         return None
 

@@ -20,7 +20,7 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 
-from .errors import SolverError
+from cfsig.errors import SolverError
 
 _TOLERANCE = 1e-8
 _CHECK_TOLERANCE = 1e-3  # the quick search for a missed copy of a repeated eigenvalue

@@ -1,6 +1,6 @@
 """Fine curvature cells: where each vertex's curvature lies at all scales at once.
 
-Version 9's curvature channel (`cfsig.cfhks`) holds joint histograms of adjacent scales on 17
+Version 9's curvature channel (`cfsig.descriptors.intrinsic`) holds joint histograms of adjacent scales on 17
 bins per axis. Version 10 also keeps, for partial queries, the joint histogram of all the
 scales at once on finer bins: a vertex's cell is its first scale's bin and its steps from each
 scale's bin to the next, each clipped to within ``band`` bins, ``bins * (2 band + 1)^(k - 1)``
@@ -35,7 +35,7 @@ Scorer = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 def curvature_bins(values: np.ndarray, bins: int) -> np.ndarray:
-    """The bin of each curvature value on the axis of `cfsig.cfhks.curvature_histograms`.
+    """The bin of each curvature value on the axis of `cfsig.descriptors.intrinsic.curvature_histograms`.
 
     Parameters
     ----------
@@ -61,7 +61,7 @@ def window_cells(values: np.ndarray, bins: int, band: int, joint: int) -> np.nda
     Parameters
     ----------
     values : (n, k) float64
-        Curvature at k scales (`cfsig.curvature.smoothed_curvature`), dimensionless.
+        Curvature at k scales (`cfsig.operators.curvature.smoothed_curvature`), dimensionless.
     bins : int
         Bins of the first scale of a window (`curvature_bins`).
     band : int
@@ -161,7 +161,7 @@ def area_units(fractions: np.ndarray) -> np.ndarray:
     -------
     units : uint16 array, the shape of ``fractions``
         ``fractions * UNIT`` in float32, rounded to the nearest integer (ties to even), as
-        `cfsig.cells_llvm` rounds them.
+        `cfsig.search.cells_llvm` rounds them.
     """
     scaled = np.asarray(fractions, np.float32) * np.float32(UNIT)
     return np.rint(np.clip(scaled, 0, UNIT)).astype(np.uint16)
@@ -217,11 +217,11 @@ def cell_scores(
 
     For a share ``f``, with the part's histogram ``p`` and a whole's ``w`` (each of mass 1),
     ``(1 - sum(min(f p, w)) / f) + sum(|p - w|)``: the unexplained share plus the L1 distance,
-    `cfsig.parts.partial_scores` with weight 1; the smallest over the shares. Both terms are
+    `cfsig.search.partial.partial_scores` with weight 1; the smallest over the shares. Both terms are
     summed in integers, on the fractions in units of ``1 / UNIT`` (`area_units`; method.md,
     section 19): ``1 - E / F`` and ``(P + W - 2 C) / UNIT``, with ``E`` and ``C`` the sums of
     ``min(f p, w)`` and ``min(p, w)``, ``F`` and ``P`` those of ``f p`` and ``p``, ``W`` that
-    of ``w``; `cfsig.cells_llvm` computes the same numbers.
+    of ``w``; `cfsig.search.cells_llvm` computes the same numbers.
 
     Parameters
     ----------
@@ -267,7 +267,7 @@ def part_scorer(
         As `cell_scores`.
     rows : int
         Rows the search will score: from `FAST_MIN_ROWS`, the compiled kernel if llvmlite is
-        installed and the system lets it run code it compiles (`cfsig.cells_llvm.part_scorer`,
+        installed and the system lets it run code it compiles (`cfsig.search.cells_llvm.part_scorer`,
         8 to 125 times as fast), else `cell_scores`: the same scores.
 
     Returns
@@ -278,7 +278,7 @@ def part_scorer(
     """
     if rows >= FAST_MIN_ROWS:
         try:
-            fast = importlib.import_module("cfsig.cells_llvm")
+            fast = importlib.import_module("cfsig.search.cells_llvm")
             scorer: Scorer = fast.part_scorer(part, shares)
         except (ImportError, OSError):  # no llvmlite, or no executable memory (SELinux)
             pass

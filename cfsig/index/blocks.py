@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import h5py
 import numpy as np
 
-from .errors import IndexFileError
+from cfsig.errors import IndexFileError
 
 _PLAIN_TYPES = (np.dtype(np.float32), np.dtype(np.uint16))  # native: the bytes are the values
 # MADV_POPULATE_READ (Linux 5.14, not in Python's mmap module): a block's page table filled in

@@ -1,6 +1,6 @@
 """Pictures: meshes coloured by phi, signature histograms, precision/recall curves, result grids.
 
-The meshes are drawn by `cfsig.raster`; matplotlib (Agg, imported inside the functions that need
+The meshes are drawn by `cfsig.figures.raster`; matplotlib (Agg, imported inside the functions that need
 it) only lays out and draws images, text, colour bars and plots, and Pillow (which matplotlib
 installs) writes them as RGB PNG files. `write_ply` exports phi on a mesh through trimesh, for
 MeshLab or Blender. Same input, same bytes: nothing depends on the time, the display or the
@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import CfsigError
-from .mesh import Mesh, read_mesh
-from .raster import CMAP, colormap, require_matplotlib, shade_mesh, unit_interval
+from cfsig.errors import CfsigError
+from cfsig.figures.raster import CMAP, colormap, require_matplotlib, shade_mesh, unit_interval
+from cfsig.files.mesh import Mesh, read_mesh
 
 _DPI = 100
 _PANEL, _CAPTION, _COLORBAR = 480, 40, 110  # pixels of `render_phi`

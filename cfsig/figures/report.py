@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .figures import plot_precision_recall, render_grid, retrieval_row
-from .measures import RetrievalReport
+from cfsig.evaluation.measures import RetrievalReport
+from cfsig.figures.plots import plot_precision_recall, render_grid, retrieval_row
 
 PAGE = "index.html"
 _RESULTS = 10

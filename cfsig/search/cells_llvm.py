@@ -1,12 +1,12 @@
-"""The fine-cell kernel, compiled by LLVM (optional extra ``cfsig[fast]``); see `cfsig.cells`.
+"""The fine-cell kernel, compiled by LLVM (optional extra ``cfsig[fast]``); see `cfsig.descriptors.cells`.
 
 One pass over each row's slots, written as LLVM vector code with llvmlite and compiled for this
 CPU once a process (docs/partial.md, "Version 10: vector code"). A group of 16 slots has its
-fractions rounded to units (`cfsig.cells.area_units`), or is skipped when they are all 0 (a
+fractions rounded to units (`cfsig.descriptors.cells.area_units`), or is skipped when they are all 0 (a
 row's padding); each slot's cell then finds its row of the part's table (row 0, all zeros, for
 the cells the part lacks), whose 32 lanes of 16 bits, ``f p`` and ``p`` at each share, take
 their minimum with the slot's units and are summed in registers. The sums are integers, so the
-scores are `cfsig.cells.cell_scores`' to the last bit. Each group prefetches the slots `_AHEAD`
+scores are `cfsig.descriptors.cells.cell_scores`' to the last bit. Each group prefetches the slots `_AHEAD`
 on. Loads bound the kernel, not arithmetic: the cells are read four at a time and the table's
 rows are found through 16-bit numbers. Listing the held slots first, as an earlier kernel did,
 cost more than scoring the slots a part lacks. Importing llvmlite and compiling take about
@@ -26,7 +26,7 @@ import llvmlite.binding as llvm
 import numpy as np
 from llvmlite import ir
 
-from .cells import UNIT, part_table
+from cfsig.descriptors.cells import UNIT, part_table
 
 _LANES = 16  # shares a table row holds: a part has at most that many, padded
 _ALIGN = 64  # bytes: a table row is one cache line
@@ -44,29 +44,29 @@ _ROW = ir.VectorType(_SHORT, 2 * _LANES)  # a table row: f p, then p, at each sh
 # (docs/partial.md, "Version 10: vector code"; 256 to 4,096 measured alike).
 _AHEAD = 512
 # scores(rows, table, masses, explained, cells, fractions, out, count, width): the addresses of
-# `cfsig.cells.part_table`'s arrays and the wholes', then two counts; ctypes releases the GIL.
+# `cfsig.descriptors.cells.part_table`'s arrays and the wholes', then two counts; ctypes releases the GIL.
 _Kernel = Callable[..., None]
 
 
 def part_scorer(
     part: Sequence[tuple[np.ndarray, np.ndarray]], shares: tuple[float, ...]
 ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-    """`cfsig.cells.cell_scores` of one part, compiled: one pass over each row's cells.
+    """`cfsig.descriptors.cells.cell_scores` of one part, compiled: one pass over each row's cells.
 
-    The part's histograms are laid out once (`cfsig.cells.part_table`), for every block of rows
-    the scorer is given. The scores are `cfsig.cells.cell_scores`' to the last bit.
+    The part's histograms are laid out once (`cfsig.descriptors.cells.part_table`), for every block of rows
+    the scorer is given. The scores are `cfsig.descriptors.cells.cell_scores`' to the last bit.
 
     Parameters
     ----------
     part : sequence of (cells, fractions)
-        The part's `cfsig.cells.cell_histogram` at each share, cells below 65,536.
+        The part's `cfsig.descriptors.cells.cell_histogram` at each share, cells below 65,536.
     shares : tuple of float
         The shares, one per histogram of ``part``, at most 16.
 
     Returns
     -------
     scorer : callable
-        ``scorer(cells, fractions)``: the wholes' (m, slots) uint16 `cfsig.cells.packed_cells`
+        ``scorer(cells, fractions)``: the wholes' (m, slots) uint16 `cfsig.descriptors.cells.packed_cells`
         and their (m, slots) float32 fractions to their (m,) float64 scores; releases the GIL.
 
     Raises
@@ -201,7 +201,7 @@ def _call(builder, name: str, result, *values):
 
 
 def _units(builder, fractions):
-    """`cfsig.cells.area_units` of a <16 x float>: scaled in float32, clipped to [0, UNIT],
+    """`cfsig.descriptors.cells.area_units` of a <16 x float>: scaled in float32, clipped to [0, UNIT],
     rounded to the nearest (ties to even, as NumPy's ``rint``)."""
     low, high = (ir.Constant(_FLOATS, [v] * _LANES) for v in (0.0, float(UNIT)))
     scaled = builder.fmul(fractions, high)
@@ -274,7 +274,7 @@ def _row_sums(builder, room, rows, table, cells, fractions, row, width):
 
 def _row_score(builder, sums, whole, masses, explained):
     """The row's score from its sums: the least over the shares of ``(1 - E / F) + (P + W -
-    2 C) / UNIT``, in float64 and in `cfsig.cells.cell_scores`' order of operations."""
+    2 C) / UNIT``, in float64 and in `cfsig.descriptors.cells.cell_scores`' order of operations."""
     lanes, wide = ir.VectorType(_INT, _LANES), ir.VectorType(_INT, 2 * _LANES)
     both = builder.add(builder.zext(sums[0], wide), builder.zext(sums[1], wide))
     explained_sums, common = (

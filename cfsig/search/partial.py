@@ -1,7 +1,7 @@
 """Partial queries: find the whole shapes that a part of a shape (a cut, a scan) comes from.
 
 The paper names partial matching as the natural extension (section 4). The global channels of
-``cfhks`` change when a shape is cut, but its curvature at small scales (`cfsig.curvature`)
+``cfhks`` change when a shape is cut, but its curvature at small scales (`cfsig.operators.curvature`)
 changes only near the cut: a part's histograms of it are close to those of the whole it was
 cut from, once both are measured at the same scale. That scale is relative to the whole's
 area, which a part does not know, so the part is measured for each share ``f`` of `SHARES`:
@@ -9,7 +9,7 @@ diffusion times ``s * area / f`` and values divided by ``f``, as if its whole ha
 ``area / f``. A whole's partial distance, over those shares, is the smallest sum of two terms
 (`partial_scores`): the share of the part's histograms that the whole's cannot hold (a part is
 a subset of its whole's surface), and their L1 distance. Version 10 keeps beside each
-whole's vector its fine curvature cells (`cfsig.cells`): a part of such an index is measured at
+whole's vector its fine curvature cells (`cfsig.descriptors.cells`): a part of such an index is measured at
 the 13 `FINE_SHARES` and compared by its cells instead, every row's read (docs/method.md,
 section 19).
 
@@ -28,17 +28,17 @@ from functools import partial
 
 import numpy as np
 
-from .blocks import Block, map_file, mapped_block, plan_blocks, read_block
-from .cells import cell_histogram, part_scorer
-from .cfhks import DESIGNS, Design, curvature_histograms, weigh_curvature
-from .conformal import Operators, operators
-from .curvature import smoothed_curvature
-from .errors import MeshError, PartialError, SolverError
-from .index import IndexReader, SegmentView
-from .mesh import Mesh, read_mesh
-from .nearest import Hit, l1_distances, nearest, parallel
-from .params import Params, curvature_slice
-from .simplify import simplified_mesh
+from cfsig.descriptors.cells import cell_histogram, part_scorer
+from cfsig.descriptors.intrinsic import DESIGNS, Design, curvature_histograms, weigh_curvature
+from cfsig.errors import MeshError, PartialError, SolverError
+from cfsig.files.mesh import Mesh, read_mesh
+from cfsig.index.blocks import Block, map_file, mapped_block, plan_blocks, read_block
+from cfsig.index.store import IndexReader, SegmentView
+from cfsig.operators.conformal import Operators, operators
+from cfsig.operators.curvature import smoothed_curvature
+from cfsig.params import Params, curvature_slice
+from cfsig.repair.simplify import simplified_mesh
+from cfsig.search.nearest import Hit, l1_distances, nearest, parallel
 
 SHARES = tuple(2.0 ** (-j / 2) for j in range(7))  # a part's area over its whole's: 1 to 1/8
 # The shares at which a part's fine cells are measured (`Part.cells`): a fine histogram moves by
@@ -69,7 +69,7 @@ class Part:
         cells; None for the others.
     cells : tuple of (cells, fractions), or None
         For the versions that keep fine cells (`cfsig.params.cell_slots`), the part's
-        `cfsig.cells.cell_histogram` of all its scales at each share of `FINE_SHARES`: cells
+        `cfsig.descriptors.cells.cell_histogram` of all its scales at each share of `FINE_SHARES`: cells
         (c,) int64 ascending, fractions (c,) float64 summing to 1; None for the others.
     """
 
@@ -120,7 +120,7 @@ def curvature_columns(params: Params) -> slice:
     Returns
     -------
     columns : slice
-        The last columns, of the size of the version's `cfsig.cfhks.curvature_shape`.
+        The last columns, of the size of the version's `cfsig.descriptors.intrinsic.curvature_shape`.
 
     Raises
     ------
@@ -206,7 +206,7 @@ def share_curvatures(
     design = DESIGNS[params.version]
     if not design.curvature_on_copy:
         return _share_values(operators(mesh, params.mollify), design, shares)
-    # The wholes' curvature is measured on copies of `coarse` faces (`cfsig.cfhks`): a part
+    # The wholes' curvature is measured on copies of `coarse` faces (`cfsig.descriptors.intrinsic`): a part
     # that is a share f of its whole is simplified to f times as many. The part's own operators
     # serve the shares it has too few faces to simplify for, built once if any.
     curvatures, whole = [], None
@@ -236,7 +236,7 @@ def _share_values(
     return [(values[:, i], ops.vertex_area) for i in range(len(shares))]
 
 
-def partial_search(reader: IndexReader, part: Part, k: int = 20) -> tuple[list[Hit], float]:
+def query_part(reader: IndexReader, part: Part, k: int = 20) -> tuple[list[Hit], float]:
     """The whole shapes related to a part: the nearest by its curvature, then its relatives.
 
     Parameters
@@ -285,7 +285,7 @@ def _nearest_by_cells(
 ) -> tuple[int, float] | None:
     """The row of the smallest partial distance by fine cells, and that distance; the first
     such row on ties; None for an empty index. Reads every live row's cells, chunk by chunk
-    (`cfsig.blocks`), one thread per core: in place from a memory map of each segment file
+    (`cfsig.index.blocks`), one thread per core: in place from a memory map of each segment file
     where they are plain bytes, else through a buffer."""
     tasks: list[_CellTask] = []
     for view in reader.segments:
@@ -380,13 +380,13 @@ def partial_distances(
     params : Params
         Their parameters.
     cells : ((N, slots) uint16, (N, slots) float32), optional
-        The wholes' fine cells and fractions (`cfsig.signature.Signature.cells`), needed when
+        The wholes' fine cells and fractions (`cfsig.descriptors.signature.Signature.cells`), needed when
         ``params`` keep them.
 
     Returns
     -------
     distances : (N,) float64
-        `partial_scores` of the wholes, or by their fine cells `cfsig.cells.part_scorer`.
+        `partial_scores` of the wholes, or by their fine cells `cfsig.descriptors.cells.part_scorer`.
 
     Raises
     ------
@@ -458,7 +458,7 @@ def expanded_distances(
     params: Params,
     cells: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
-    """Distances that rank a collection held in memory as `partial_search` ranks an index.
+    """Distances that rank a collection held in memory as `query_part` ranks an index.
 
     Parameters
     ----------

@@ -3,8 +3,8 @@
 A segment holds the rows of one commit (or of several merged by compaction), with the columns
 of the format-1 index file, the sorted 64-bit keys of its names (so that a writer finds a name
 without reading the names), the rows of older segments it supersedes, the sketch of each row
-(`cfsig.sketch`, the lower bounds a search prunes by), the curvature channel's columns of the
-signatures stored again on their own (so that a partial query, `cfsig.parts`, reads only them),
+(`cfsig.index.sketch`, the lower bounds a search prunes by), the curvature channel's columns of the
+signatures stored again on their own (so that a partial query, `cfsig.search.partial`, reads only them),
 and a CRC-32 per chunk of signatures and per column. Layout: docs/index-format.md.
 """
 
@@ -18,8 +18,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from .errors import IndexFileError
-from .sketch import sketch_center, sketch_groups, sketch_rows
+from cfsig.errors import IndexFileError
+from cfsig.index.sketch import sketch_center, sketch_groups, sketch_rows
 
 SEGMENT_FORMAT = "cfsig-segment"
 STRING = h5py.string_dtype("utf-8")
@@ -33,7 +33,7 @@ META = {
 }
 TEXT = ("names", "labels", "paths")
 COLUMNS = (*TEXT, "sha256", *META)  # the columns of a row besides its signature
-# The fine curvature cells of a row (`cfsig.cells.packed_cells`), (rows, slots) each, in the
+# The fine curvature cells of a row (`cfsig.descriptors.cells.packed_cells`), (rows, slots) each, in the
 # segments of a descriptor that keeps them (`cfsig.params.cell_slots`).
 CELLS = {"cells": np.uint16, "cell_fractions": np.float32}
 _DTYPES = {**{k: STRING for k in TEXT}, "sha256": "S64", **META}
@@ -115,7 +115,7 @@ def write_segment(
 ) -> None:
     """Write a segment file from pieces of rows, with the keys of its names, sketches, checksums.
 
-    The sketches are computed from the signatures (`cfsig.sketch`), on a centre taken from the
+    The sketches are computed from the signatures (`cfsig.index.sketch`), on a centre taken from the
     first piece (`sketch_center`).
 
     Parameters

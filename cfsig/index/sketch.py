@@ -5,7 +5,7 @@ centre that its segment stores. For any two rows a and b and any groups,
 ``sum_g |sum_{i in g} a_i - sum_{i in g} b_i| <= sum_i |a_i - b_i|``: the L1 distance of two
 sketches is at most that of their rows. A search scans the sketches (34 float32 a row for the
 542 of ``cfhks``), then computes exact distances only for the rows whose bound does not exceed
-the k-th best exact distance found (`cfsig.nearest`). Adjacent coordinates of ``cfhks`` are
+the k-th best exact distance found (`cfsig.search.nearest`). Adjacent coordinates of ``cfhks`` are
 sorted quantile functions and nearly equal, so their differences keep their sign within a
 group and the bound is tight (docs/index-scale.md, where the group size was chosen).
 

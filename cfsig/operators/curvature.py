@@ -19,12 +19,12 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .conformal import Operators, factorize
-from .errors import SolverError
+from cfsig.errors import SolverError
+from cfsig.operators.conformal import Operators, factorize
 
 # Relative residual of the conjugate gradients of versions 3 and 4: the values then agree with a
 # direct solve's to about 1e-9 relative. Version 5 stops at 1e-5, versions 6 and 7 at 1e-3
-# (`cfsig.cfhks`).
+# (`cfsig.descriptors.intrinsic`).
 CG_TOLERANCE = 1e-10
 # About as many iterations as a factorisation costs (benchmarks/descriptors.py stages): a
 # system that needs more is factorised, and so is every larger scale's, worse conditioned.
@@ -42,7 +42,7 @@ def smoothed_curvature(
     Parameters
     ----------
     ops : Operators
-        The mesh's operators (`cfsig.conformal.operators`): its angle defects, boundary,
+        The mesh's operators (`cfsig.operators.conformal.operators`): its angle defects, boundary,
         vertex areas and cotangent Laplacian.
     scales : tuple of float
         Diffusion times divided by the surface area (dimensionless); ``sqrt(s)`` is about the

@@ -1,4 +1,4 @@
-"""The L1 kernel of faiss (optional extra ``cfsig[fast]``); see `cfsig.l1`."""
+"""The L1 kernel of faiss (optional extra ``cfsig[fast]``); see `cfsig.search.l1`."""
 
 from __future__ import annotations
 

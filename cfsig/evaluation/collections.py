@@ -3,8 +3,8 @@
 A `Collection` holds the signatures of labelled meshes for one descriptor, computed from a
 folder (`compute_collection`) or read from an index (`collection_from_index`);
 `evaluate_collections` evaluates one or several of them side by side on the same meshes with
-the measures of `cfsig.measures`, the classes taken from the folders or from a `.cla` file
-(`cfsig.cla`).
+the measures of `cfsig.evaluation.measures`, the classes taken from the folders or from a `.cla` file
+(`cfsig.files.cla`).
 """
 
 from __future__ import annotations
@@ -16,16 +16,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .batch import Progress, compute_many, successes
-from .cla import labels_from_cla
-from .errors import MeshError
-from .files import find_meshes, mesh_label
-from .index import IndexReader
-from .isolate import Limits
-from .measures import RetrievalReport, evaluate_distances, evaluate_queries
-from .nearest import l1_distances
-from .params import Params, signature_length
-from .parts import curvature_columns, expanded_distances, partial_file
+from cfsig.batch import Progress, compute_many, successes
+from cfsig.errors import MeshError
+from cfsig.evaluation.measures import RetrievalReport, evaluate_distances, evaluate_queries
+from cfsig.files.cla import labels_from_cla
+from cfsig.files.folders import find_meshes, mesh_label
+from cfsig.index.store import IndexReader
+from cfsig.isolate import Limits
+from cfsig.params import Params, signature_length
+from cfsig.search.nearest import l1_distances
+from cfsig.search.partial import curvature_columns, expanded_distances, partial_file
 
 
 @dataclass(frozen=True)
@@ -135,7 +135,7 @@ def compute_collection(
 ) -> tuple[Collection, list[str]]:
     """Compute the signatures of all mesh files in a folder, each subfolder a class.
 
-    Files are found by `cfsig.files.find_meshes` and computed in spawned worker processes by
+    Files are found by `cfsig.files.folders.find_meshes` and computed in spawned worker processes by
     `cfsig.batch.compute_many` (in a script, call it under ``if __name__ == "__main__":``); a
     file that fails is left out and reported.
 
@@ -224,7 +224,7 @@ def evaluate_partial(
 
     Each mesh of ``folder`` is a part (a cut, a scan, a shape with holes) whose class is the
     name of the folder holding it; it is ranked against every indexed mesh as
-    `cfsig.parts.partial_search` ranks them, and the relevant ones are the indexed meshes of
+    `cfsig.search.partial.query_part` ranks them, and the relevant ones are the indexed meshes of
     its class (`evaluate_queries`).
 
     Parameters

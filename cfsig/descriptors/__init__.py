@@ -1,0 +1,1 @@
+"""Descriptors: a vector per mesh whose L1 distance compares shapes."""

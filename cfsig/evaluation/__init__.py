@@ -1,0 +1,1 @@
+"""Evaluation: retrieval measures of labelled collections."""

@@ -1,0 +1,1 @@
+"""Figures: meshes drawn coloured, histograms, precision/recall curves, reports."""

@@ -1,0 +1,1 @@
+"""Files: reading meshes, finding them under folders, class files, the demo collection."""

@@ -1,0 +1,1 @@
+"""The index: a folder of immutable HDF5 segments behind an atomically replaced manifest."""

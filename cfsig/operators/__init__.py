@@ -1,0 +1,1 @@
+"""Operators: the Laplacian, curvature, the conformal factor and the spectrum of a mesh."""

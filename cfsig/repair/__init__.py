@@ -1,0 +1,1 @@
+"""Repair: from any triangle input to a surface the descriptors mean something on."""
