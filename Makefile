@@ -20,18 +20,20 @@ test: $(BIN)/python
 	$(BIN)/mypy
 	$(BIN)/pytest -q
 
+# The tables of docs/results.md (hours on two cores). DATA: made by ../shared/data/unpack all DATA.
 bench: $(BIN)/python
-	$(BIN)/pip install -q -e '.[test,bench]'
-	$(BIN)/python benchmarks/retrieval.py
+	@test -n "$(DATA)" || { echo "usage: make bench DATA=FOLDER"; exit 2; }
+	$(BIN)/pip install -q -e '.[cholmod,fast]'
+	$(BIN)/python benchmarks/results.py --data-root $(DATA) --doc docs/results.md
 
-# The per-mesh and indexing figures of docs/performance.md (about 35 minutes on two cores).
+# The per-mesh, index and partial query figures of docs/performance.md; the indexes go in SCRATCH.
+SCRATCH ?= ../cfsig-bench
 bench-perf: $(BIN)/python
-	$(BIN)/pip install -q -e '.[bench,cholmod,dask]'
-	$(BIN)/python benchmarks/per_mesh.py
-	$(BIN)/python benchmarks/parsers.py
-	$(BIN)/python benchmarks/solvers.py
-	$(BIN)/python benchmarks/shapedna.py
-	$(BIN)/python benchmarks/index_jobs.py
+	@test -n "$(DATA)" || { echo "usage: make bench-perf DATA=FOLDER [SCRATCH=DIR]"; exit 2; }
+	$(BIN)/pip install -q -e '.[cholmod,fast]'
+	$(BIN)/python benchmarks/per_mesh.py --data $(DATA)/shrec07
+	$(BIN)/python benchmarks/index_scale.py --dir $(SCRATCH) --sizes 1000000
+	$(BIN)/python benchmarks/partial_speed.py --index-dir $(SCRATCH) --rows 1000000
 
 clean:
 	rm -rf $(VENV) cfsig-demo .pytest_cache .ruff_cache .mypy_cache .hypothesis

@@ -5,9 +5,12 @@ hidden inner parts. This script writes, for every clean mesh of a labelled colle
 (``<class>/<file>``) and every kind of mess, one messy copy ``OUT/<kind>/<class>/<file>``, then
 measures how well each copy's signature finds its own clean original:
 
-    python benchmarks/messy.py write --out DIR     # the messy copies and their check figures
-    python benchmarks/messy.py measure --out DIR   # signatures and retrieval of those copies
-    python benchmarks/messy.py run                 # both, in a temporary folder by default
+    python benchmarks/messy.py write --data FOLDER --out DIR    # the copies, check figures
+    python benchmarks/messy.py measure --data FOLDER --out DIR  # signatures and retrieval
+    python benchmarks/messy.py run --data FOLDER                # both, in a temporary folder
+
+``FOLDER`` holds the clean meshes ``<class>/<file>`` (e.g. ``DATA/shrec07``); ``--every K``
+takes every k-th in sorted order.
 
 Kinds (`KINDS`; each copy is seeded by its file's name and the kind, so reruns are identical):
 
@@ -24,8 +27,8 @@ Kinds (`KINDS`; each copy is seeded by its file's name and the kind, so reruns a
 Three more kinds (`SCAN_KINDS`, only when ``--kinds`` names them) are not mess for the repair
 stage to undo but the ways a scan of a shape differs from its model:
 
-- ``remesh``: simplified to half its faces by quadric edge collapses (`cfsig.repair.simplify.decimate`),
-  so that no vertex or triangle is the model's.
+- ``remesh``: simplified to half its faces by quadric edge collapses
+  (`cfsig.repair.simplify.decimate`), so that no vertex or triangle is the model's.
 - ``light-noise``, ``noise``: every vertex moved by Gaussian noise whose standard deviation per
   coordinate is 3% or 10% of the mesh's mean edge length.
 
@@ -52,10 +55,9 @@ import common
 import igl
 import numpy as np
 
-from cfsig.batch import compute_many
-from cfsig.descriptors import intrinsic as cfhks
-from cfsig.evaluation.collections import evaluate_distances
-from cfsig.params import DESCRIPTORS, REPAIR_MODES, Params
+from cfsig import Params, compute_many, evaluate_distances
+from cfsig.descriptors import NAMES as DESCRIPTORS
+from cfsig.params import REPAIR_MODES
 from cfsig.repair.simplify import decimate
 from cfsig.search.nearest import l1_distances
 
@@ -573,12 +575,6 @@ def measure(
     messy, failures = signatures([p for ps in paths.values() for p in ps], params, args.jobs)
     index = np.array([vector(clean[f]) for f in files])
     n, copies, collections = len(files), [], {"clean": collection(list(index), labels)}
-    # each channel of cfhks alone too: which of them a kind of copy moves
-    channels: dict[str, slice] = {}
-    if params.descriptor == "cfhks" and params.version is not None:
-        channels = cfhks.channel_columns(cfhks.DESIGNS[params.version])
-    for name, columns in channels.items():
-        collections[f"clean, {name} alone"] = collection(list(index[:, columns]), labels)
     mixed = [paths[kinds[i % len(kinds)]][i] for i in range(n)]
     collections["messy (kinds round-robin)"] = collection(
         [vector(messy[p]) if p in messy else None for p in mixed], labels
@@ -608,11 +604,6 @@ def measure(
         vectors = [vector(messy[p]) if p in messy else None for p in paths[kind]]
         collections[f"all {kind}"] = collection(vectors, labels)
         collections[f"each {kind} against the clean others"] = collection(vectors, labels, index)
-        for name, columns in channels.items():
-            alone = [None if v is None else v[columns] for v in vectors]
-            collections[f"each {kind} against the clean others, {name} alone"] = collection(
-                alone, labels, index[:, columns]
-            )
     return {
         "command": command(),
         "params": params.to_json(),
@@ -698,7 +689,7 @@ def main() -> None:
         help="kinds of copy [the six kinds of mess]",
     )  # fmt: skip
     parser.add_argument("--jobs", type=int, default=2, help="worker processes for signatures")
-    parser.add_argument("--descriptor", choices=DESCRIPTORS, default="cfhks")
+    parser.add_argument("--descriptor", choices=DESCRIPTORS, default="intrinsic")
     parser.add_argument("--repair", choices=REPAIR_MODES, help="default: the library's")
     parser.add_argument("--check", type=int, default=3, help="meshes whose copies are checked")
     parser.add_argument("--doc", type=Path, help="write the results as Markdown here")

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 # Public name -> the module that defines it.
 _EXPORTS = {
     "Params": "params",
+    "layout": "descriptors",
     "Signature": "descriptors.signature",
     "signature_file": "descriptors.signature",
     "compute_signature": "descriptors.signature",
@@ -62,6 +63,7 @@ __all__ = [
     "evaluate_partial",
     "evaluate_queries",
     "index_meshes",
+    "layout",
     "read_cla",
     "partial_file",
     "query_part",
@@ -72,6 +74,7 @@ __all__ = [
 
 if TYPE_CHECKING:
     from cfsig.batch import compute_many, index_meshes
+    from cfsig.descriptors import layout
     from cfsig.descriptors.signature import Signature, compute_signature, signature_file
     from cfsig.errors import CfsigError
     from cfsig.evaluation.collections import (

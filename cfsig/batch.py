@@ -153,7 +153,8 @@ def index_meshes(
 ) -> tuple[int, list[str]]:
     """Compute the new and changed meshes under some files and folders and add them to an index.
 
-    Files are found by `cfsig.files.folders.find_meshes` as the computation goes: the first is computed
+    Files are found by `cfsig.files.folders.find_meshes` as the computation goes: the first is
+    computed
     as soon as it is found, not after the whole folder has been scanned. A file whose name is
     indexed with the same contents (SHA-256) is skipped, and only those files are hashed; the
     others are computed by `compute_many` and added as `Entry` (name, the name of the folder
@@ -348,7 +349,8 @@ def _compute_on_cluster(
 
 
 def _signature_file(limits: Limits | None) -> Compute:
-    """`cfsig.descriptors.signature.signature_file` with ``limits``, imported when first needed: the process
+    """`cfsig.descriptors.signature.signature_file` with ``limits``, imported when first needed:
+    the process
     that hands out the files and writes the index computes nothing, and so starts without
     loading SciPy (docs/performance.md, "Start-up")."""
     from cfsig.descriptors.signature import signature_file

@@ -14,9 +14,10 @@ from typing import TYPE_CHECKING, Any, NoReturn
 
 import click
 
+from cfsig.descriptors import NAMES
 from cfsig.errors import CfsigError
 from cfsig.isolate import Limits
-from cfsig.params import DEFAULT_VERSIONS, DESCRIPTORS, REPAIR_MODES, SOLVERS, Params
+from cfsig.params import REPAIR_MODES, SOLVERS, Params
 
 if TYPE_CHECKING:  # each command imports what it uses, so that `cfsig --help` starts fast
     from cfsig.descriptors.signature import Signature
@@ -25,7 +26,6 @@ if TYPE_CHECKING:  # each command imports what it uses, so that `cfsig --help` s
 
 EXIT_ERROR = 1
 EXIT_SKIPPED = 3
-RETRIEVAL_DESCRIPTOR = "cfhks"  # the default of index and evaluate: docs/descriptors.md
 _GRID_COLUMNS = 7  # tiles per row of a single query's --png grid
 LOG_SECONDS = 60.0  # the progress bar's redraws into a file (a batch job's log): one a minute
 _FILE = click.Path(dir_okay=False, path_type=Path)
@@ -51,20 +51,12 @@ _params_options = [
 ]
 _descriptor_option = click.option(
     "--descriptor",
-    type=click.Choice(DESCRIPTORS),
+    type=click.Choice(NAMES),
     default=None,
-    help="What to compute: the paper's histogram (cf) or the spectrum and heat kernel "
-    "signatures (cfhks, its default version) [compute: cf; index: cfhks, or an existing "
-    "index's own descriptor and version].",
+    help="What to compute: the spectrum, heat kernel signatures and curvature at scales "
+    "(intrinsic), or the paper's histogram of the conformal factor (cf) [intrinsic, or an "
+    "existing index's own].",
 )
-_version_option = click.option(
-    "--descriptor-version", "version", type=int, default=None,
-    help="The descriptor's version [its default: "
-    + ", ".join(f"{name} {v}" for name, v in DEFAULT_VERSIONS.items())
-    + "; index: an existing index's own]: e.g. cfhks 10, which keeps fine curvature cells "
-    "for partial queries, or cfhks 6, whose finer curvature matches exact cuts best but not "
-    "noisy scans (docs/descriptors.md).",
-)  # fmt: skip
 _solver_option = click.option(
     "--solver",
     type=click.Choice(SOLVERS),
@@ -109,16 +101,10 @@ def _with(options: list[Callable]) -> Callable:
 
 
 def _params(base: Params | None = None, **given: Any) -> Params:
-    """Parameters from the options that were given, on top of ``base`` or the defaults.
-
-    A descriptor other than ``base``'s is taken at its default version.
-    """
+    """Parameters from the options that were given, on top of ``base`` or the defaults."""
     given = {k: v for k, v in given.items() if v is not None}
     try:
-        base = base or Params()
-        if "descriptor" in given:
-            base = base.with_descriptor(given.pop("descriptor"))
-        return replace(base, **given)
+        return replace(base or Params(), **given)
     except ValueError as exc:
         raise click.BadParameter(str(exc)) from None
 
@@ -154,15 +140,13 @@ def main() -> None:
 @click.argument("meshes", nargs=-1, required=True, type=_PATH)
 @_with(_params_options)
 @_descriptor_option
-@_version_option
 @_solver_option
 @_stage_timeout_option
 @_json_option
 @click.option(
     "--save",
     type=_FOLDER,
-    help="Write DIR/<name>.npz with the signature and per-vertex phi (and the fine curvature "
-    "cells of a version that keeps them, cfhks 10).",
+    help="Write DIR/<name>.npz with the signature and per-vertex phi.",
 )
 @click.option(
     "--png",
@@ -186,7 +170,6 @@ def compute(
     bins,
     repair,
     descriptor,
-    version,
     solver,
     stage_timeout,
     as_json,
@@ -206,9 +189,8 @@ def compute(
     if ply and len(meshes) > 1:
         raise click.UsageError("--ply writes one mesh: give a single MESH")
     params = _params(
-        normalize=normalize, seed=seed, bins=bins, repair=repair, descriptor=descriptor,
-        version=version,
-    )  # fmt: skip
+        normalize=normalize, seed=seed, bins=bins, repair=repair, descriptor=descriptor
+    )
     if hist and params.descriptor != "cf":
         raise click.UsageError("--hist plots the histograms of the cf descriptor")
     import numpy as np
@@ -290,7 +272,6 @@ def _report_errors(errors: list[str]) -> None:
 )
 @_with(_params_options)
 @_descriptor_option
-@_version_option
 @_solver_option
 @_stage_timeout_option
 @_jobs_option
@@ -300,6 +281,13 @@ def _report_errors(errors: list[str]) -> None:
     "processes; the mesh paths must be readable on the workers. Needs the dask extra.",
 )  # fmt: skip
 @click.option("--strict", is_flag=True, help="Stop at the first file that fails.")
+@click.option(
+    "--partial-cells/--no-partial-cells",
+    default=None,
+    help="Keep each mesh's fine curvature cells (intrinsic only, about 6 KB a mesh), which "
+    "partial queries then rank by: right far more often on parts of people and animals, at "
+    "a cost over large indexes (docs/performance.md) [no, or an existing index's own].",
+)
 @_count_option(
     "--commit-every",
     default=200,
@@ -313,15 +301,17 @@ def index(
     bins,
     repair,
     descriptor,
-    version,
     solver,
     stage_timeout,
     jobs,
     scheduler,
     strict,
+    partial_cells,
     commit_every,
 ) -> None:
-    """Index mesh files and folders (recursively: OFF, OBJ, PLY, STL) into an index folder.
+    """Index mesh files and folders (recursively: OFF, OBJ, PLY, STL, glTF, GLB, 3MF).
+
+    The index is a folder, created if needed.
 
     Each mesh is stored under its path relative to the folder given, labelled with the name of
     the folder that holds it. Running the command again adds new and changed files only.
@@ -331,26 +321,22 @@ def index(
 
     \b
     Example:
-      cfsig index shrec07/ -o shrec07.h5 --jobs 2
-      cfsig index /shared/shrec07/ -o shrec07.h5 --scheduler tcp://10.0.0.5:8786
+      cfsig index shrec07/ -o shrec07-index --jobs 2
+      cfsig index /shared/shrec07/ -o shrec07-index --scheduler tcp://10.0.0.5:8786
     """
     if jobs is not None and scheduler is not None:
         raise click.UsageError("give --jobs or --scheduler, not both")
     from cfsig.batch import index_meshes
-    from cfsig.index.store import IndexReader, IndexWriter
+    from cfsig.descriptors import layout
+    from cfsig.index.store import IndexWriter, existing_params
 
     routes: Counter[str] = Counter()
     try:
-        base = None
-        if output.exists():
-            with IndexReader(output) as reader:
-                base = reader.params
-        descriptor = descriptor or (None if base else RETRIEVAL_DESCRIPTOR)
         params = _params(
-            base, normalize=normalize, seed=seed, bins=bins, repair=repair,
-            descriptor=descriptor, version=version,
+            existing_params(output), normalize=normalize, seed=seed, bins=bins, repair=repair,
+            descriptor=descriptor, partial_cells=partial_cells,
         )  # fmt: skip
-        with IndexWriter(output, params) as writer:
+        with IndexWriter(output, params, layout(params)) as writer:
             bar = partial(_progress, what="indexing", routes=routes)
             added, skipped = index_meshes(
                 writer, paths, solver, jobs, scheduler, strict, commit_every, bar,
@@ -417,14 +403,15 @@ def query(index_file, meshes, k, solver, stage_timeout, as_json, png, partial) -
     partial distance, 0 to 3, follows the query's name in the text output and is the first
     result's "partial_distance" in the JSON), the others the
     meshes nearest to that whole, with their distances to it (docs/method.md); it needs an
-    index of cfhks version 3 or later. In the --png picture a query whose folder
+    index of the intrinsic descriptor, and ranks by fine curvature cells where the index keeps
+    them (cfsig index --partial-cells). In the --png picture a query whose folder
     name is a class of the index has its results framed green (same class) or orange.
 
     \b
     Example:
-      cfsig query shrec07.h5 shrec07/ant/81.off -k 10
-      cfsig query shrec07.h5 shrec07/ant/81.off --png ant.png
-      cfsig query shrec07.h5 scan.ply --partial
+      cfsig query shrec07-index shrec07/ant/81.off -k 10
+      cfsig query shrec07-index shrec07/ant/81.off --png ant.png
+      cfsig query shrec07-index scan.ply --partial
     """
     import numpy as np
 
@@ -488,8 +475,8 @@ def query(index_file, meshes, k, solver, stage_timeout, as_json, png, partial) -
 @click.option(
     "--descriptor",
     "descriptors",
-    help=f"Descriptors to compare side by side, comma-separated ({', '.join(DESCRIPTORS)}) "
-    f"[{RETRIEVAL_DESCRIPTOR}; with --index, the index's own].",
+    help=f"Descriptors to compare side by side, comma-separated ({', '.join(NAMES)}) "
+    f"[{NAMES[0]}; with --index, the index's own].",
 )
 @_with(_params_options)
 @_solver_option
@@ -544,10 +531,10 @@ def evaluate(
     \b
     Example:
       cfsig evaluate shrec07/
-      cfsig evaluate shrec07/ --descriptor cf,cfhks
+      cfsig evaluate shrec07/ --descriptor cf,intrinsic
       cfsig evaluate shrec07/ --classes shrec07.cla --json
-      cfsig evaluate --index shrec07.h5 --plot pr.png --report report/
-      cfsig evaluate --index shrec07.h5 --partial scans/
+      cfsig evaluate --index shrec07-index --plot pr.png --report report/
+      cfsig evaluate --index shrec07-index --partial scans/
     """
     if (folder is None) == (index_file is None):
         raise click.UsageError("give a FOLDER or --index, not both")
@@ -639,10 +626,10 @@ def _evaluate_partial(index_file: Path, parts: Path, as_json: bool) -> None:
 
 def _descriptor_list(text: str | None) -> list[str]:
     """The distinct descriptor names of a comma-separated ``--descriptor`` value."""
-    names = [d.strip() for d in (text or RETRIEVAL_DESCRIPTOR).split(",") if d.strip()]
-    if not names or set(names) - set(DESCRIPTORS) or len(set(names)) < len(names):
+    names = [d.strip() for d in (text or NAMES[0]).split(",") if d.strip()]
+    if not names or set(names) - set(NAMES) or len(set(names)) < len(names):
         raise click.BadParameter(
-            f"{text!r}: give distinct names from {', '.join(DESCRIPTORS)}",
+            f"{text!r}: give distinct names from {', '.join(NAMES)}",
             param_hint="--descriptor",
         )
     return names
@@ -707,7 +694,7 @@ def check(index_file) -> None:
 
     \b
     Example:
-      cfsig check shrec07.h5
+      cfsig check shrec07-index
     """
     from cfsig.index.store import IndexReader, check_index
 
@@ -737,7 +724,7 @@ def compact(index_file) -> None:
 
     \b
     Example:
-      cfsig compact shrec07.h5
+      cfsig compact shrec07-index
     """
     from cfsig.index.store import compact_index
 
@@ -746,27 +733,6 @@ def compact(index_file) -> None:
     except CfsigError as exc:
         _fail(str(exc))
     click.echo(f"{index_file}: {before} segment(s) merged into 1, {rows} entries")
-
-
-@main.command()
-@click.argument("old", type=_PATH)
-@click.argument("new", type=_PATH)
-def convert(old, new) -> None:
-    """Write an index of an older format (one HDF5 file) as a new index in this format.
-
-    OLD is left unchanged; NEW must not exist.
-
-    \b
-    Example:
-      cfsig convert shrec07-v1.h5 shrec07.h5
-    """
-    from cfsig.index.store import convert_index
-
-    try:
-        rows = convert_index(old, new)
-    except CfsigError as exc:
-        _fail(str(exc))
-    click.echo(f"{new}: {rows} entries converted from {old}")
 
 
 @main.command()
@@ -782,7 +748,7 @@ def demo(ctx: click.Context, out: Path) -> None:
     """Run cfsig end to end on a generated collection: index, query, evaluate.
 
     Writes 30 synthetic meshes in 6 classes (bodies with 1, 2, 3 and 5 limbs, tori, capsules;
-    5 poses each) to OUT, indexes them into OUT/demo.h5, queries with one mesh of each of two
+    5 poses each) to OUT, indexes them into OUT/index, queries with one mesh of each of two
     classes, and prints the retrieval measures.
 
     \b
@@ -793,7 +759,7 @@ def demo(ctx: click.Context, out: Path) -> None:
 
     paths = make_demo_collection(out / "meshes")
     click.echo(f"Wrote {len(paths)} meshes to {out / 'meshes'}")
-    index_file = out / "demo.h5"
+    index_file = out / "index"
     ctx.invoke(index, paths=(out / "meshes",), output=index_file)
     queries = (paths[0], paths[len(paths) // 2])
     ctx.invoke(query, index_file=index_file, meshes=queries, k=5)

@@ -1,47 +1,13 @@
-"""The parameters of a signature: one frozen dataclass, stored in every index."""
+"""The parameters of a signature, one frozen dataclass stored in every index, and the layout of
+the rows an index keeps for them."""
 
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, fields
 
-DESCRIPTORS = ("cf", "cfhks")
-# The versions of each descriptor (docs/descriptors.md), and the one made by default: cfhks
-# version 10 adds fine curvature cells for partial queries to version 9's vector, at a cost in
-# disk and in partial queries over large indexes (docs/partial.md), so it is asked for by name.
-VERSIONS = {"cf": (1,), "cfhks": (1, 2, 3, 4, 5, 6, 7, 8, 9, 10)}
-DEFAULT_VERSIONS = {"cf": 1, "cfhks": 9}
 REPAIR_MODES = ("auto", "off", "proxy")
-# The length of the cfhks vector per version, `cfsig.descriptors.intrinsic.DESIGNS[version].length`
-# (tests/test_cfhks.py checks that the two agree), here so that an index needs no SciPy.
-CFHKS_LENGTHS = {
-    1: 64 + 30 + 64 * 4,
-    2: 30 + 64 * 8,
-    3: 30 + 64 * 8 + 48 * 4,
-    4: 30 + 64 * 8 + 48 * 4,
-    5: 30 + 64 * 8 + 49 * 4,
-    6: 30 + 64 * 8 + 49 * 4,
-    7: 60 + 64 * 8 + 49 * 4,
-    8: 45 + 64 * 8 + 49 * 4,
-    9: 45 + 64 * 8 + 3 * 17 * 5,
-    10: 45 + 64 * 8 + 3 * 17 * 5,
-}
-# The width of its curvature channel, the vector's last columns (`cfsig.descriptors.intrinsic.channel_columns`),
-# for the versions that have one.
-CFHKS_CURVATURE = {
-    **dict.fromkeys((3, 4), 48 * 4),
-    **dict.fromkeys((5, 6, 7, 8), 49 * 4),
-    **dict.fromkeys((9, 10), 3 * 17 * 5),
-}
-# The fine curvature cells kept per row beside the vector, `cfsig.descriptors.cells.SLOTS`, by the versions
-# that keep them (`cfsig.descriptors.intrinsic.Design.fine`).
-CFHKS_CELLS = {10: 1024}
-SOLVERS = (
-    "auto",
-    "cholmod",
-    "eigen",
-    "scipy",
-)  # sparse solver backends (`cfsig.operators.conformal`)
+SOLVERS = ("auto", "cholmod", "eigen", "scipy")  # sparse solver backends (`cfsig.operators`)
 
 
 @dataclass(frozen=True)
@@ -54,12 +20,9 @@ class Params:
     Attributes
     ----------
     descriptor : str
-        What the signature is (one of `DESCRIPTORS`; docs/descriptors.md): ``"cf"``, the
-        paper's histogram of phi, to which every other attribute applies; ``"cfhks"``, the
-        low Laplace-Beltrami spectrum and heat kernel signatures (version 1 also the quantiles
-        of phi, version 3 and later also the curvature at four scales), whose constants are
-        fixed per version in `cfsig.descriptors.intrinsic` and which uses only ``mollify`` and ``repair`` of
-        the others.
+        What the signature is, a name of `cfsig.descriptors.NAMES`: ``"intrinsic"``, the
+        default (the spectrum, heat kernel signatures and curvature at scales), or ``"cf"``, the
+        paper's histogram of phi. ``bins`` to ``normalize`` apply to ``cf`` only.
     bins : int
         Number of histogram bins (paper section 2.3: 200).
     low, high : float
@@ -77,12 +40,15 @@ class Params:
         (Sharp and Crane 2020); 0 disables it.
     repair : str
         What to do with a mesh that is not one closed manifold (one of `REPAIR_MODES`;
-        `cfsig.repair.stage.repair_mesh`): ``"auto"`` repairs it locally or replaces it by a proxy
-        of its outer surface, ``"proxy"`` always takes the proxy, ``"off"`` solves each part
-        as read. Clean closed manifolds are never changed.
+        `cfsig.repair.stage.repair_mesh`): ``"auto"`` repairs it locally or replaces it by a
+        proxy of its outer surface, ``"proxy"`` always takes the proxy, ``"off"`` solves each
+        part as read. Clean closed manifolds are never changed.
+    partial_cells : bool
+        ``intrinsic`` only: keep each mesh's fine curvature cells beside its vector, so that
+        partial queries of the index rank by them (`cfsig.descriptors.cells`).
     """
 
-    descriptor: str = "cf"
+    descriptor: str = "intrinsic"
     bins: int = 200
     low: float = -99.5
     high: float = 100.5
@@ -91,7 +57,7 @@ class Params:
     normalize: bool = False
     mollify: float = 1e-5
     repair: str = "auto"
-    version: int | None = None
+    partial_cells: bool = False
 
     def __post_init__(self) -> None:
         if self.bins < 1 or self.samples_per_face < 0 or not self.low < self.high:
@@ -102,34 +68,8 @@ class Params:
             raise ValueError(
                 f"unknown repair mode {self.repair!r}; choose from {', '.join(REPAIR_MODES)}"
             )
-        if self.descriptor not in DESCRIPTORS:
-            raise ValueError(
-                f"unknown descriptor {self.descriptor!r}; choose from {', '.join(DESCRIPTORS)}"
-            )
-        versions = VERSIONS[self.descriptor]
-        if self.version is None:
-            object.__setattr__(self, "version", DEFAULT_VERSIONS[self.descriptor])  # frozen
-        elif self.version not in versions:
-            raise ValueError(
-                f"{self.descriptor} has no version {self.version}; this cfsig computes "
-                f"{', '.join(map(str, versions))}"
-            )
-
-    def with_descriptor(self, descriptor: str) -> Params:
-        """The same parameters for ``descriptor``, at its default version when it is another one.
-
-        Parameters
-        ----------
-        descriptor : str
-            One of `DESCRIPTORS`.
-
-        Returns
-        -------
-        params : Params
-        """
-        if descriptor == self.descriptor:
-            return self
-        return replace(self, descriptor=descriptor, version=None)
+        if self.partial_cells and self.descriptor != "intrinsic":
+            raise ValueError("partial cells are kept by the intrinsic descriptor only")
 
     @property
     def edges(self) -> tuple[float, float]:
@@ -142,74 +82,54 @@ class Params:
 
     @classmethod
     def from_json(cls, text: str) -> Params:
-        """Parse what `to_json` wrote; unknown keys raise ``ValueError``.
+        """Parse what `to_json` wrote.
 
-        An index written before descriptors had names holds the paper's ``"cf"``, the default;
-        one written before the repair stage existed was made without it, ``repair="off"``; one
-        written before descriptors had versions holds version 1.
+        Raises
+        ------
+        ValueError
+            Unknown or invalid keys, as the parameters of a removed descriptor hold.
         """
         data = json.loads(text)
-        data.setdefault("repair", "off")
-        data.setdefault("version", 1)
-        known = {f.name for f in fields(cls)}
-        unknown = set(data) - known
+        unknown = set(data) - {f.name for f in fields(cls)}
         if unknown:
             raise ValueError(f"unknown parameters {sorted(unknown)}")
         return cls(**data)
 
 
-def signature_length(params: Params) -> int:
-    """Length of the signature vectors that ``params`` make.
+@dataclass(frozen=True)
+class Layout:
+    """What an index keeps per row for a descriptor, which the descriptor declares
+    (`cfsig.descriptors.layout`) and the index stores without knowing the descriptor.
 
-    Parameters
+    Attributes
     ----------
-    params : Params
-        Signature parameters.
-
-    Returns
-    -------
     length : int
-        ``params.bins`` for ``cf``; the fixed length of the version of ``cfhks`` otherwise.
+        Entries of the signature vector.
+    groups : tuple of (str, int, int)
+        Named column groups ``(name, start, stop)`` of the vector that the index also stores on
+        their own, for searches that read only them (``"curvature"``: partial queries).
+    cells : int
+        Fine curvature cells kept per row beside the vector (`Params.partial_cells`); 0: none.
     """
-    if params.descriptor == "cf":
-        return params.bins
-    assert params.version is not None  # resolved by Params.__post_init__
-    return CFHKS_LENGTHS[params.version]
 
+    length: int
+    groups: tuple[tuple[str, int, int], ...] = ()
+    cells: int = 0
 
-def curvature_slice(params: Params) -> slice | None:
-    """Where the curvature channel lies in the signature vectors that ``params`` make.
-
-    Parameters
-    ----------
-    params : Params
-        Signature parameters.
-
-    Returns
-    -------
-    columns : slice or None
-        The last columns of the vector for ``cfhks`` version 3 and later; None for descriptors
-        without that channel.
-    """
-    width = CFHKS_CURVATURE.get(params.version or 0) if params.descriptor == "cfhks" else None
-    if width is None:
+    def group(self, name: str) -> slice | None:
+        """The columns of the group ``name``, or None when the layout has no such group."""
+        for group, start, stop in self.groups:
+            if group == name:
+                return slice(start, stop)
         return None
-    length = signature_length(params)
-    return slice(length - width, length)
 
+    def to_json(self) -> str:
+        """Serialise to a JSON object with sorted keys."""
+        return json.dumps(asdict(self), sort_keys=True)
 
-def cell_slots(params: Params) -> int | None:
-    """How many fine curvature cells the signatures that ``params`` make keep per row.
-
-    Parameters
-    ----------
-    params : Params
-        Signature parameters.
-
-    Returns
-    -------
-    slots : int or None
-        `cfsig.descriptors.cells.SLOTS` for ``cfhks`` version 10 and later; None for descriptors that keep
-        none.
-    """
-    return CFHKS_CELLS.get(params.version or 0) if params.descriptor == "cfhks" else None
+    @classmethod
+    def from_json(cls, text: str) -> Layout:
+        """Parse what `to_json` wrote."""
+        data = json.loads(text)
+        groups = tuple((str(n), int(a), int(b)) for n, a, b in data.pop("groups"))
+        return cls(groups=groups, **data)

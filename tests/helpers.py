@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cfsig.descriptors import layout
 from cfsig.descriptors.signature import Signature, compute_signature
 from cfsig.files.mesh import clean_mesh
 from cfsig.index.store import Entry, IndexWriter
@@ -96,7 +97,7 @@ def random_rotation(seed: int) -> np.ndarray:
 
 def signature_vector(vertices: np.ndarray, faces: np.ndarray, params: Params | None = None):
     """The signature vector of a mesh given as arrays, cleaned by `clean_mesh`."""
-    return compute_signature(clean_mesh(vertices, faces), params or Params()).vector
+    return compute_signature(clean_mesh(vertices, faces), params or Params(descriptor="cf")).vector
 
 
 def l1(a: np.ndarray, b: np.ndarray) -> float:
@@ -131,7 +132,9 @@ def random_signature(seed: int, bins: int = 200) -> Signature:
 
 def build_index(path: str | os.PathLike, n: int = 10, params: Params | None = None) -> list:
     """An index of ``n`` random signatures in classes c0, c1, c2; return their vectors."""
-    with IndexWriter(path, params or Params()) as w:
+    with IndexWriter(
+        path, params or Params(descriptor="cf"), layout(params or Params(descriptor="cf"))
+    ) as w:
         for i in range(n):
             entry = Entry(f"c{i % 3}/{i}.off", f"c{i % 3}", f"/data/c{i % 3}/{i}.off")
             w.add(entry, random_signature(i))

@@ -6,6 +6,7 @@ import sys
 import pytest
 
 import cfsig
+from cfsig.descriptors import layout
 
 
 def test_every_public_name_resolves_to_its_module():
@@ -43,8 +44,10 @@ def test_readme_example_runs_from_the_package(tmp_path):
     from tests.helpers import icosphere, write_off
 
     path = write_off(tmp_path / "ball" / "1.off", *icosphere(2))
-    sig = cfsig.signature_file(path, cfsig.Params())
-    with cfsig.IndexWriter(tmp_path / "i.h5", cfsig.Params()) as writer:
+    sig = cfsig.signature_file(path, cfsig.Params(descriptor="cf"))
+    with cfsig.IndexWriter(
+        tmp_path / "i.h5", cfsig.Params(descriptor="cf"), layout(cfsig.Params(descriptor="cf"))
+    ) as writer:
         writer.add(cfsig.Entry("ball/1.off", "ball", str(path)), sig)
     with cfsig.IndexReader(tmp_path / "i.h5") as index:
         hits = cfsig.query(index, sig.vector[None], k=1)[0]

@@ -96,7 +96,7 @@ def test_polygons_and_mixed_ply_are_triangulated(tmp_path):
     assert read_mesh(tmp_path / "cube.obj").faces.shape == (12, 3)
     off = "\n".join(["OFF", "8 6 0", *verts, *quads])
     (tmp_path / "cube.off").write_text(off + "\n")
-    sig = signature_file(tmp_path / "cube.off", Params())
+    sig = signature_file(tmp_path / "cube.off", Params(descriptor="cf"))
     assert np.isfinite(sig.vector).all() and sig.n_faces == 12
 
 
@@ -124,10 +124,10 @@ def test_zero_area_and_needle_triangles_are_mollified():
         d = len(v)
         vv = np.vstack([v, d_pos])
         ff = np.vstack([f[1:], [[a, d, c], [d, b, c], [a, b, d]]])
-        sig = compute_signature(read_mesh_arrays(vv, ff), Params())
+        sig = compute_signature(read_mesh_arrays(vv, ff), Params(descriptor="cf"))
         assert np.isfinite(sig.vector).all() and np.isfinite(sig.phi).all(), name
         assert any("mollified" in r for r in sig.repairs), name
-        base = compute_signature(read_mesh_arrays(v, f), Params()).vector
+        base = compute_signature(read_mesh_arrays(v, f), Params(descriptor="cf")).vector
         assert np.abs(sig.vector - base).sum() < 0.05, name
 
 
@@ -139,7 +139,7 @@ def read_mesh_arrays(v, f):
 
 @pytest.mark.parametrize("make", [disk, open_cylinder], ids=["disk", "cylinder"])
 def test_open_boundaries(make):
-    sig = compute_signature(read_mesh_arrays(*make()), Params())
+    sig = compute_signature(read_mesh_arrays(*make()), Params(descriptor="cf"))
     assert np.isfinite(sig.vector).all() and sig.vector.sum() == pytest.approx(1)
     assert abs(sig.phi.mean()) < 1e-12
 
@@ -185,7 +185,7 @@ def test_meshes_at_the_bounds_of_scale_are_measured_cleanly(scale):
         largest, span = np.abs(v * scale).max(), np.ptp(v * scale, axis=0).max()
         assert largest <= MAX_COORDINATE and span >= MIN_SPAN
         assert largest >= MAX_COORDINATE / 10 or span <= 10 * MIN_SPAN  # near a bound
-    descriptors = (Params(), Params(descriptor="cfhks"), Params(descriptor="cfhks", version=10))
+    descriptors = (Params(descriptor="cf"), Params(), Params(partial_cells=True))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         for v, f in (sphere, cylinder):
@@ -193,7 +193,7 @@ def test_meshes_at_the_bounds_of_scale_are_measured_cleanly(scale):
             for params in descriptors:
                 assert np.isfinite(compute_signature(mesh, params).vector).all()
         part = read_mesh_arrays(cylinder[0] * scale, cylinder[1])
-        for version in (9, 10):
-            measured = measure_part(part, Params(descriptor="cfhks", version=version))
+        for cells in (False, True):
+            measured = measure_part(part, Params(partial_cells=cells))
             values = measured.vectors if measured.cells is None else measured.cells[0][1]
             assert np.isfinite(values).all()

@@ -15,6 +15,7 @@ import cfsig.index.store
 from cfsig import batch
 from cfsig.batch import compute_many, index_meshes
 from cfsig.cli import main
+from cfsig.descriptors import layout
 from cfsig.descriptors.signature import signature_file
 from cfsig.errors import ClusterError
 from cfsig.index.store import IndexReader, IndexWriter
@@ -49,13 +50,15 @@ def test_a_crashing_worker_costs_only_its_file(meshes):
     crash = meshes / "round" / "crash.off"
     crash.write_bytes((meshes / "round" / "a.off").read_bytes())
     paths = sorted(meshes.glob("*/*.off"))
-    outcomes = _by_name(compute_many(paths, Params(), jobs=2, compute=signature_or_crash))
+    outcomes = _by_name(
+        compute_many(paths, Params(descriptor="cf"), jobs=2, compute=signature_or_crash)
+    )
     assert sorted(outcomes) == sorted(p.name for p in paths)
     assert "crashed" in outcomes["crash.off"].error
     assert outcomes["broken.off"].signature is None and "truncated" in outcomes["broken.off"].error
     for path in paths:
         if path.name not in ("crash.off", "broken.off"):
-            expected = signature_file(path, Params()).vector
+            expected = signature_file(path, Params(descriptor="cf")).vector
             assert np.array_equal(outcomes[path.name].signature.vector, expected)
 
 
@@ -67,7 +70,7 @@ def test_index_meshes_adds_new_and_changed_files_only(meshes, tmp_path):
         yield from outcomes
         seen.append(total())
 
-    with IndexWriter(index, Params()) as writer:
+    with IndexWriter(index, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as writer:
         added, failures = index_meshes(writer, [meshes], jobs=2, progress=progress)
     assert added == 5 and seen == [6]
     assert len(failures) == 1 and failures[0].startswith(f"{meshes / 'ring' / 'broken.off'}: ")
@@ -78,22 +81,26 @@ def test_index_meshes_adds_new_and_changed_files_only(meshes, tmp_path):
     assert sorted(set(labels)) == ["ring", "round"]
     assert entry.path == str((meshes / "ring" / "d.off").resolve())
     write_off(meshes / "round" / "a.off", *torus(nu=20, nv=8))  # changed contents
-    with IndexWriter(index, Params()) as writer:
+    with IndexWriter(index, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as writer:
         added, failures = index_meshes(writer, [meshes], jobs=1, progress=progress)
     assert added == 1 and len(failures) == 1 and seen == [6, 2]  # a.off and broken.off again
     with IndexReader(index) as reader:
         assert len(reader) == 5
         row = list(reader.column("names")).index("round/a.off")
         stored = reader.signatures[row]
-    expected = signature_file(meshes / "round" / "a.off", Params()).vector
+    expected = signature_file(meshes / "round" / "a.off", Params(descriptor="cf")).vector
     assert np.allclose(stored, expected, atol=1e-6)
 
 
 def test_index_meshes_strict_and_taken_names(meshes, tmp_path):
-    with IndexWriter(tmp_path / "strict.h5", Params()) as writer:
+    with IndexWriter(
+        tmp_path / "strict.h5", Params(descriptor="cf"), layout(Params(descriptor="cf"))
+    ) as writer:
         added, failures = index_meshes(writer, [meshes], jobs=1, strict=True)
     assert added == 0 and len(failures) == 1  # ring/broken.off is the first file computed
-    with IndexWriter(tmp_path / "twice.h5", Params()) as writer:
+    with IndexWriter(
+        tmp_path / "twice.h5", Params(descriptor="cf"), layout(Params(descriptor="cf"))
+    ) as writer:
         added, failures = index_meshes(writer, [meshes / "round", meshes / "round"], jobs=1)
     assert added == 3 and len(failures) == 3
     assert all("is already taken by another file" in line for line in failures)
@@ -103,7 +110,11 @@ def test_missing_scheduler_is_a_cluster_error(meshes, monkeypatch):
     pytest.importorskip("distributed")
     monkeypatch.setattr(batch, "_CONNECT_TIMEOUT", "1s")
     with pytest.raises(ClusterError, match="cannot connect"):
-        list(compute_many([meshes / "round" / "a.off"], Params(), scheduler="tcp://127.0.0.1:9"))
+        list(
+            compute_many(
+                [meshes / "round" / "a.off"], Params(descriptor="cf"), scheduler="tcp://127.0.0.1:9"
+            )
+        )
 
 
 def _start(args: list[str], env: dict) -> subprocess.Popen:
@@ -164,8 +175,8 @@ def dask_cluster(tmp_path):
 
 def test_dask_cluster_gives_the_local_results(meshes, dask_cluster):
     paths = sorted(meshes.glob("*/*.off"))
-    remote = _by_name(compute_many(paths, Params(), scheduler=dask_cluster))
-    local = _by_name(compute_many(paths, Params(), jobs=1))
+    remote = _by_name(compute_many(paths, Params(descriptor="cf"), scheduler=dask_cluster))
+    local = _by_name(compute_many(paths, Params(descriptor="cf"), jobs=1))
     assert sorted(remote) == sorted(local) == sorted(p.name for p in paths)
     assert remote["broken.off"].signature is None and "truncated" in remote["broken.off"].error
     for name, outcome in local.items():
@@ -192,7 +203,7 @@ def test_dask_batches_lose_only_their_bad_files(meshes, dask_cluster, monkeypatc
     real_islice = batch.islice
     monkeypatch.setattr(batch, "islice", lambda it, n: sizes.append(n) or real_islice(it, n))
     monkeypatch.setattr(batch, "_TASK_SECONDS", 1e6)  # the largest batches once one is back
-    outcomes = list(compute_many(paths, Params(), scheduler=dask_cluster,
+    outcomes = list(compute_many(paths, Params(descriptor="cf"), scheduler=dask_cluster,
                                  compute=signature_or_crash))  # fmt: skip
     by_name = _by_name(outcomes)
     assert len(outcomes) == len(paths) and sorted(by_name) == sorted(p.name for p in paths)
@@ -206,7 +217,7 @@ def test_dask_batches_lose_only_their_bad_files(meshes, dask_cluster, monkeypatc
     assert "truncated" in by_name["broken.off"].error
     for path in paths:
         if path.name not in ("crash.off", "oops.off", "broken.off"):
-            expected = signature_file(path, Params()).vector
+            expected = signature_file(path, Params(descriptor="cf")).vector
             assert np.array_equal(by_name[path.name].signature.vector, expected)
 
 
@@ -232,7 +243,9 @@ def test_index_meshes_computes_while_the_folder_is_scanned(meshes, tmp_path, mon
             yield outcome
 
     monkeypatch.setattr(batch, "find_meshes", slow_scan)
-    with IndexWriter(tmp_path / "i", Params()) as writer:
+    with IndexWriter(
+        tmp_path / "i", Params(descriptor="cf"), layout(Params(descriptor="cf"))
+    ) as writer:
         index_meshes(writer, [meshes], jobs=1, progress=progress)
     assert at_first_outcome[0] < 6  # the first signature came before the scan ended
     assert totals == sorted(totals) and totals[0] < totals[-1] == 6  # the total grew
@@ -242,6 +255,8 @@ def test_index_meshes_computes_while_the_folder_is_scanned(meshes, tmp_path, mon
     monkeypatch.setattr(
         cfsig.index.store.hashlib, "sha256", lambda data: hashed.append(data) or real_sha256(data)
     )
-    with IndexWriter(tmp_path / "i", Params()) as writer:
+    with IndexWriter(
+        tmp_path / "i", Params(descriptor="cf"), layout(Params(descriptor="cf"))
+    ) as writer:
         added, _ = index_meshes(writer, [meshes], jobs=1)
     assert added == 1 and len(hashed) == 5  # only the files whose names are indexed

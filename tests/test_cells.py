@@ -1,36 +1,37 @@
-"""Fine curvature cells (cfsig.descriptors.cells): the histograms, their scores, version 10's signatures and
-their storage in an index."""
+"""Fine curvature cells (cfsig.descriptors.cells): the histograms, their scores (cfsig.search.cells
+and the compiled kernel), the signatures that keep them and their storage in an index."""
 
 import functools
 import os
+import sys
 from dataclasses import replace
 
 import h5py
 import numpy as np
 import pytest
 
-from cfsig.descriptors.cells import (
-    FAST_MIN_ROWS,
-    SLOTS,
-    UNIT,
-    area_units,
-    cell_histogram,
-    cell_scores,
-    packed_cells,
-    part_scorer,
-    window_cells,
-)
-from cfsig.descriptors.intrinsic import DESIGNS, curvature_histograms
+from cfsig.descriptors import intrinsic, layout
+from cfsig.descriptors.cells import SLOTS, cell_histogram, packed_cells, window_cells
+from cfsig.descriptors.intrinsic import curvature_histograms
 from cfsig.descriptors.signature import compute_signature
 from cfsig.errors import IndexFileError
 from cfsig.files.mesh import clean_mesh
 from cfsig.index.blocks import plan_blocks
-from cfsig.index.store import Entry, IndexReader, IndexWriter, check_index, convert_index
-from cfsig.params import Params, cell_slots, signature_length
-from cfsig.search.partial import FINE_SHARES, Part, measure_part, partial_distances, query_part
+from cfsig.index.store import Entry, IndexReader, IndexWriter, check_index
+from cfsig.params import Params
+from cfsig.search.cells import UNIT, area_units, cell_scores
+from cfsig.search.partial import (
+    FAST_MIN_ROWS,
+    FINE_SHARES,
+    Part,
+    measure_part,
+    part_scorer,
+    partial_distances,
+    query_part,
+)
 from tests.helpers import random_signature, torus
 
-V10 = Params(descriptor="cfhks", version=10)
+V10 = Params(partial_cells=True)
 
 
 def _values(n, seed=0):
@@ -40,10 +41,10 @@ def _values(n, seed=0):
     return np.cumsum(np.column_stack([first, rng.normal(0, 3, (n, 3))]), axis=1)
 
 
-def test_pairs_of_scales_are_version_9s_joint_histograms():
+def test_pairs_of_scales_are_the_descriptors_joint_histograms():
     values, areas = _values(500), np.random.default_rng(1).random(500)
-    cells, fractions = cell_histogram(values, areas, 17, 2, joint=2)
-    dense = curvature_histograms(values, areas, 17, 2).ravel() / 3  # three windows of mass 1/3
+    cells, fractions = cell_histogram(values, areas, intrinsic.BINS, intrinsic.BAND, joint=2)
+    dense = curvature_histograms(values, areas).ravel() / 3  # three windows of mass 1/3
     assert np.array_equal(cells, np.flatnonzero(dense)) and np.allclose(fractions, dense[cells])
 
 
@@ -114,11 +115,10 @@ def test_area_units_round_to_nearest():
     assert list(units) == [0, 0, 2, UNIT // 4, UNIT, UNIT, 0]  # ties to even; clipped to [0, 1]
 
 
-@pytest.mark.parametrize("slots", [400, 407])  # whole groups of 16 slots, and 7 left over
-def test_compiled_scores_are_numpys(slots):
-    pytest.importorskip("llvmlite", reason="the compiled kernel is the extra cfsig[fast]")
+@pytest.mark.parametrize(("slots", "shares"), [(400, FINE_SHARES), (407, FINE_SHARES * 2)])
+def test_compiled_scores_are_numpys(slots, shares):
+    pytest.importorskip("numba", reason="the compiled kernel is the extra cfsig[fast]")
     rng = np.random.default_rng(5)
-    shares = FINE_SHARES
     part = [_histogram(rng, 200) for _ in shares]
     cells = np.zeros((300, slots), np.uint16)
     fractions = np.zeros((300, slots), np.float32)
@@ -128,7 +128,7 @@ def test_compiled_scores_are_numpys(slots):
             c, w = part[row % len(shares)]
         w = w.copy()
         w[rng.random(len(w)) < 0.05] = 0  # occupied slots of no area, among the others
-        if row % 7 == 1:  # 32 slots of no area, between held ones: a group skipped, not the end
+        if row % 7 == 1:  # 32 slots of no area, between held ones
             w[16:48] = 0
         cells[row, : len(c)], fractions[row, : len(c)] = c, w
     fast = part_scorer(part, shares, FAST_MIN_ROWS)
@@ -144,60 +144,26 @@ def test_compiled_scores_are_numpys(slots):
     assert empty == pytest.approx([2.0, 2.0], abs=1e-2)
 
 
-@pytest.mark.parametrize("cpu", ["x86-64", "haswell"])  # SSE2 only; AVX2 without AVX-512
-def test_compiled_scores_on_older_processors(monkeypatch, cpu):
-    cells_llvm = pytest.importorskip("cfsig.search.cells_llvm", reason="the extra cfsig[fast]")
-    if os.uname().machine != "x86_64":
-        pytest.skip("the processors named are x86's")
-    monkeypatch.setattr(cells_llvm, "_kernel", functools.partial(cells_llvm._kernel, cpu))
-    rng = np.random.default_rng(3)
-    part = [_histogram(rng, 200) for _ in FINE_SHARES]
-    cells, fractions = np.zeros((50, 407), np.uint16), np.zeros((50, 407), np.float32)
-    for row in range(50):
-        c, w = _histogram(rng, int(rng.integers(1, 407)))
-        cells[row, : len(c)], fractions[row, : len(c)] = c, w
-    got = cells_llvm.part_scorer(part, FINE_SHARES)(cells, fractions)
-    assert np.array_equal(got, cell_scores(part, FINE_SHARES, cells, fractions))
-
-
-def test_compiled_scores_take_16_shares_at_most():
-    cells_llvm = pytest.importorskip("cfsig.search.cells_llvm", reason="the extra cfsig[fast]")
-    part = [(np.array([1, 2]), np.array([0.5, 0.5]))] * 17
-    with pytest.raises(ValueError, match="17 shares"):
-        cells_llvm.part_scorer(part, (1.0,) * 17)
-
-
-@pytest.mark.parametrize("case", ["small search", "not installed", "no executable memory"])
-def test_numpy_scores_without_llvmlite(monkeypatch, case):
+@pytest.mark.parametrize("case", ["small search", "not installed"])
+def test_numpy_scores_without_numba(monkeypatch, case):
     part = [(np.array([1, 2]), np.array([0.5, 0.5]))]
     rows = FAST_MIN_ROWS - 1 if case == "small search" else FAST_MIN_ROWS
     if case == "not installed":
-
-        def fail(name):
-            raise ImportError(f"{name}: no module named llvmlite")
-
-        monkeypatch.setattr("cfsig.descriptors.cells.importlib.import_module", fail)
-    if case == "no executable memory":
-        cells_llvm = pytest.importorskip("cfsig.search.cells_llvm", reason="the extra cfsig[fast]")
-
-        def forbidden():
-            raise OSError(13, "cannot allocate executable memory")
-
-        monkeypatch.setattr(cells_llvm.llvm, "check_jit_execution", forbidden)
-        monkeypatch.setattr(cells_llvm, "_kernel", functools.cache(cells_llvm._kernel.__wrapped__))
+        monkeypatch.setitem(sys.modules, "cfsig.search.cells_numba", None)  # import fails
+        monkeypatch.delattr("cfsig.search.cells_numba", raising=False)
     scorer = part_scorer(part, (1.0,), rows)
     cells, fractions = np.array([[1, 2]], np.uint16), np.array([[0.5, 0.5]], np.float32)
     assert isinstance(scorer, functools.partial) and scorer.func is cell_scores
     assert scorer(cells, fractions)[0] == 0.0
 
 
-def test_version_10_is_version_9s_vector_with_cells():
+def test_partial_cells_keep_the_vector_and_add_the_cells():
     mesh = clean_mesh(*torus())
     sig = compute_signature(mesh, V10)
-    assert np.array_equal(sig.vector, compute_signature(mesh, replace(V10, version=9)).vector)
-    assert compute_signature(mesh, replace(V10, version=9)).cells is None
+    assert np.array_equal(sig.vector, compute_signature(mesh, Params()).vector)
+    assert compute_signature(mesh, Params()).cells is None
     cells, fractions = sig.cells
-    assert cells.shape == fractions.shape == (SLOTS,) == (cell_slots(V10),)
+    assert cells.shape == fractions.shape == (SLOTS,) == (layout(V10).cells,)
     assert fractions.sum() == pytest.approx(1.0, rel=1e-5) and (fractions > 0).sum() > 1
     # The whole measured as a part at share 1 finds the same cells.
     ((part_cells, part_fractions), *_) = measure_part(mesh, V10).cells
@@ -205,24 +171,23 @@ def test_version_10_is_version_9s_vector_with_cells():
     used = fractions > 0
     assert np.array_equal(part_cells, cells[used])
     assert np.allclose(part_fractions, fractions[used], rtol=1e-5)
-    assert DESIGNS[10].fine == (33, 4)
 
 
 def _signature(seed):
-    """A version 10 signature of random values with random cells."""
+    """A signature with fine cells, of random values with random cells."""
     rng = np.random.default_rng(seed)
     cells = np.zeros(SLOTS, np.uint16)
     fractions = np.zeros(SLOTS, np.float32)
     count = int(rng.integers(1, 50))
     cells[:count] = np.sort(rng.choice(30000, count, replace=False))
     fractions[:count] = rng.random(count)
-    vector = random_signature(seed, signature_length(V10)).vector
+    vector = random_signature(seed, layout(V10).length).vector
     return replace(random_signature(seed), vector=vector, cells=(cells, fractions))
 
 
 def test_an_index_keeps_the_cells_through_merges(tmp_path):
     index, want = tmp_path / "i", {}
-    with IndexWriter(index, V10) as w:
+    with IndexWriter(index, V10, layout(V10)) as w:
         for commit in range(3):
             for i in range(5):
                 name = f"c{i % 2}/{(commit * 3 + i) % 8}.off"  # some names again: superseded
@@ -232,15 +197,12 @@ def test_an_index_keeps_the_cells_through_merges(tmp_path):
             w.commit()
         assert len(w.segments) > 1
         with pytest.raises(ValueError, match="x/y.off: no fine cells"):
-            w.add(Entry("x/y.off", "x", "/x/y.off"), random_signature(0, signature_length(V10)))
-    for step in ("committed", "compacted", "converted"):
+            w.add(Entry("x/y.off", "x", "/x/y.off"), random_signature(0, layout(V10).length))
+    for step in ("committed", "compacted"):
         if step == "compacted":
-            with IndexWriter(index, V10) as w:
+            with IndexWriter(index, V10, layout(V10)) as w:
                 w.compact()
                 assert len(w.segments) == 1
-        if step == "converted":
-            convert_index(index, tmp_path / "c")
-            index = tmp_path / "c"
         with IndexReader(index) as r:
             cells, fractions = r.cells()
             names = list(r.column("names"))
@@ -253,7 +215,7 @@ def test_an_index_keeps_the_cells_through_merges(tmp_path):
 
 def test_damaged_or_missing_cells_are_named(tmp_path):
     index = tmp_path / "i"
-    with IndexWriter(index, V10) as w:
+    with IndexWriter(index, V10, layout(V10)) as w:
         for i in range(4):
             w.add(Entry(f"c/{i}.off", "c", f"/c/{i}.off"), _signature(i))
     (segment,) = index.glob("seg-*.h5")
@@ -272,11 +234,11 @@ def test_damaged_or_missing_cells_are_named(tmp_path):
 @pytest.fixture(params=["numpy", "compiled"])
 def kernel(request, monkeypatch):
     """The fine cells scored by NumPy's kernel, or by the compiled one (skipped without
-    llvmlite)."""
+    numba)."""
     if request.param == "compiled":
-        pytest.importorskip("llvmlite", reason="the compiled kernel is the extra cfsig[fast]")
+        pytest.importorskip("numba", reason="the compiled kernel is the extra cfsig[fast]")
     fast_min_rows = 0 if request.param == "compiled" else 1 << 62
-    monkeypatch.setattr("cfsig.descriptors.cells.FAST_MIN_ROWS", fast_min_rows)
+    monkeypatch.setattr("cfsig.search.partial.FAST_MIN_ROWS", fast_min_rows)
     return request.param
 
 
@@ -292,7 +254,7 @@ def _search_finds_the_nearest(reader, cells):
 
 def test_partial_search_reads_every_live_rows_cells(tmp_path, kernel):
     index = tmp_path / "i"
-    with IndexWriter(index, V10) as w:
+    with IndexWriter(index, V10, layout(V10)) as w:
         for commit in range(3):
             for i in range(6):
                 name = f"c{i % 2}/{(commit * 4 + i) % 10}.off"  # some again: dead rows
@@ -315,7 +277,7 @@ def test_partial_search_reads_every_live_rows_cells(tmp_path, kernel):
 
 def test_partial_search_reads_compressed_cells_through_h5py(tmp_path, kernel):
     index = tmp_path / "i"
-    with IndexWriter(index, V10) as w:
+    with IndexWriter(index, V10, layout(V10)) as w:
         for i in range(12):
             w.add(Entry(f"c/{i}.off", "c", f"/d/c/{i}.off"), _signature(i))
     (segment,) = index.glob("seg-*.h5")
@@ -333,7 +295,7 @@ def test_partial_search_reads_compressed_cells_through_h5py(tmp_path, kernel):
 
 def test_partial_search_without_memory_maps_reads_the_blocks(tmp_path, monkeypatch):
     index = tmp_path / "i"
-    with IndexWriter(index, V10) as w:
+    with IndexWriter(index, V10, layout(V10)) as w:
         for i in range(8):
             w.add(Entry(f"c/{i}.off", "c", f"/d/c/{i}.off"), _signature(i))
 
@@ -349,7 +311,7 @@ def test_partial_search_without_memory_maps_reads_the_blocks(tmp_path, monkeypat
 
 def test_cells_cut_short_after_opening_are_a_clear_error(tmp_path):
     index = tmp_path / "i"
-    with IndexWriter(index, V10) as w:
+    with IndexWriter(index, V10, layout(V10)) as w:
         for i in range(6):
             w.add(Entry(f"c/{i}.off", "c", f"/d/c/{i}.off"), _signature(i))
     with IndexReader(index) as reader:

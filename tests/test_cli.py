@@ -47,24 +47,10 @@ def test_compute_text_json_and_save(collection, tmp_path):
     row = json.loads(result.stdout)[0]
     assert row["components"] == 1 and row["phi_min"] < 0 < row["phi_max"]
     saved = np.load(tmp_path / "limbs2-0.npz")
-    assert saved["signature"].shape == (200,) and len(saved["phi"]) == row["vertices"]
+    assert saved["signature"].shape == (812,) and len(saved["phi"]) == row["vertices"]
     # compute reports phi for every descriptor, also those that do not need it
-    row = json.loads(_run("compute", "--json", "--descriptor", "cfhks", mesh).stdout)[0]
+    row = json.loads(_run("compute", "--json", "--descriptor", "cf", mesh).stdout)[0]
     assert row["phi_min"] < 0 < row["phi_max"] and row["curvature_error"] >= 0
-
-
-def test_compute_a_version_by_name_saves_its_cells(collection, tmp_path):
-    mesh = collection / "limbs2" / "limbs2-0.off"
-    args = ("compute", "--json", "--save", tmp_path, "--descriptor", "cfhks")
-    assert _run(*args, mesh).exit_code == 0
-    assert "cells" not in np.load(tmp_path / "limbs2-0.npz")  # the default, version 9
-    assert _run(*args, "--descriptor-version", "10", mesh).exit_code == 0
-    saved = np.load(tmp_path / "limbs2-0.npz")
-    assert json.loads(str(saved["params"]))["version"] == 10
-    cells, fractions = saved["cells"], saved["cell_fractions"]
-    assert cells.shape == fractions.shape and abs(fractions.sum() - 1) < 1e-3
-    result = _run("compute", "--descriptor-version", "10", mesh)  # cf has one version
-    assert result.exit_code != 0 and "cf has no version 10" in result.output
 
 
 def test_compute_bad_file_one_line_error(tmp_path):
@@ -85,11 +71,11 @@ def test_index_stores_names_labels_and_metadata(built_index):
     assert len(names) == 18 and "torus/torus-1.off" in names
     assert labels[names.index("torus/torus-1.off")] == "torus"
     params = json.loads(f["attrs"]["params"])
-    assert params["descriptor"] == "cfhks"  # index's default: the better retriever
+    assert params["descriptor"] == "intrinsic"  # the default
     assert f["signatures"].shape[0] == 18
     assert np.isfinite(f["signatures"]).all()
     assert (f["n_vertices"] > 1000).all()
-    assert f["attrs"]["format_version"] == 2
+    assert f["attrs"]["format_version"] == 3
 
 
 def test_index_again_adds_only_new_and_changed(collection, tmp_path):
@@ -219,8 +205,8 @@ def test_evaluate_strict_stops_before_the_next_descriptor(collection, tmp_path, 
     monkeypatch.setattr(
         cfsig.evaluation.collections, "compute_collection", recording
     )  # cli imports it per call
-    result = _run("evaluate", folder, "--descriptor", "cf,cfhks", "-j", "1", "--strict")
+    result = _run("evaluate", folder, "--descriptor", "cf,intrinsic", "-j", "1", "--strict")
     assert result.exit_code == 1 and "bad.off" in result.output
     assert computed == ["cf"]
-    result = _run("evaluate", folder, "--descriptor", "cf,cfhks", "-j", "1")
-    assert result.exit_code == EXIT_SKIPPED and computed == ["cf", "cf", "cfhks"]
+    result = _run("evaluate", folder, "--descriptor", "cf,intrinsic", "-j", "1")
+    assert result.exit_code == EXIT_SKIPPED and computed == ["cf", "cf", "intrinsic"]

@@ -14,6 +14,7 @@ import pytest
 from click.testing import CliRunner
 
 from cfsig.cli import main
+from cfsig.descriptors import layout
 from cfsig.files.demo import make_demo_collection
 from cfsig.index.store import FORMAT_VERSION, Entry, IndexReader, IndexWriter, check_index
 from cfsig.params import Params
@@ -93,13 +94,14 @@ def test_sigkill_mid_run_then_resume(meshes, tmp_path):
     with IndexReader(index) as reader:
         assert np.isfinite(reader.signatures[:]).all()
         listed = {Path(view.signatures.file.filename).name for view in reader.segments}
-    assert {p.name for p in index.iterdir()} == listed | {"manifest.h5"}  # nothing left over
+    assert {p.name for p in index.iterdir()} == listed | {"manifest.h5", "lock"}  # no leftovers
     assert check_index(index) == []
 
 
 def test_second_writer_gets_clear_error(meshes, tmp_path):
-    index = tmp_path / "i.h5"
-    lock = open(tmp_path / "i.h5.lock", "a+")  # noqa: SIM115
+    index = tmp_path / "i"
+    index.mkdir()
+    lock = open(index / "lock", "a+")  # noqa: SIM115
     fcntl.flock(lock, fcntl.LOCK_EX)  # as a running `cfsig index` holds it
     try:
         result = CliRunner().invoke(main, ["index", str(meshes), "-o", str(index)])
@@ -107,14 +109,14 @@ def test_second_writer_gets_clear_error(meshes, tmp_path):
         lock.close()
     assert result.exit_code == 1
     assert "another process is writing this index" in result.output
-    assert not index.exists()
+    assert {p.name for p in index.iterdir()} == {"lock"}  # nothing but the first writer's lock
 
 
 def test_reader_sees_committed_state_while_writer_commits(tmp_path, build_index):
     index = tmp_path / "i.h5"
     build_index(index, 5)
     with IndexReader(index) as reader:
-        with IndexWriter(index, Params()) as writer:
+        with IndexWriter(index, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as writer:
             writer.add(Entry("new.off", "x", "/new.off"), random_signature(50))
             writer.commit()
             assert len(reader) == 5  # the open reader keeps the state it opened
@@ -136,7 +138,7 @@ def test_unusable_index_one_line_error(meshes, tmp_path, kind, build_index):
             f["data"] = np.arange(3)
     else:
         # six entries: two per class, so that evaluate has something to retrieve
-        build_index(index, 6, Params(seed=7) if kind == "params" else None)
+        build_index(index, 6, Params(descriptor="cf", seed=7) if kind == "params" else None)
         if kind == "newer":
             with h5py.File(index / "manifest.h5", "a") as f:
                 f.attrs["format_version"] = FORMAT_VERSION + 1

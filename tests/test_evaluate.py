@@ -1,4 +1,5 @@
-"""Tests for cfsig.evaluation.measures, cfsig.files.cla and cfsig.evaluation.collections: PSB measures, .cla files, collections."""
+"""Tests for cfsig.evaluation.measures, cfsig.files.cla and cfsig.evaluation.collections: PSB
+measures, .cla files, collections."""
 
 import json
 import math
@@ -265,7 +266,9 @@ def computed(folder):
             seen.append((total(), outcome.path.name))
             yield outcome
 
-    collection, failures = compute_collection(folder, Params(), jobs=1, progress=progress)
+    collection, failures = compute_collection(
+        folder, Params(descriptor="cf"), jobs=1, progress=progress
+    )
     return collection, failures, seen
 
 
@@ -275,8 +278,8 @@ def test_compute_collection_in_file_order_with_folder_labels(folder, computed):
     assert collection.names == names
     assert collection.labels == ("shapes", "ring", "ring", "round", "round", "round")
     assert collection.paths == tuple(str(folder / name) for name in names)
-    assert collection.signatures.shape == (6, Params().bins)
-    expected = signature_file(folder / "round" / "b.off", Params(), "auto").vector
+    assert collection.signatures.shape == (6, Params(descriptor="cf").bins)
+    expected = signature_file(folder / "round" / "b.off", Params(descriptor="cf"), "auto").vector
     assert np.array_equal(collection.signatures[4], expected)
     assert collection.seconds.shape == (6,) and (collection.seconds > 0).all()
     assert len(failures) == 1 and failures[0].startswith(f"{folder / 'ring' / 'broken.off'}: ")
@@ -288,20 +291,22 @@ def test_compute_collection_every_file_failing(tmp_path):
     for name in ("x.off", "y.off"):
         (tmp_path / "a" / name).parent.mkdir(exist_ok=True)
         (tmp_path / "a" / name).write_text("OFF\n")
-    collection, failures = compute_collection(tmp_path, Params(bins=50), jobs=1)
+    collection, failures = compute_collection(tmp_path, Params(descriptor="cf", bins=50), jobs=1)
     assert len(collection) == 0 and collection.signatures.shape == (0, 50)
     assert sorted(line.split(":")[0] for line in failures) == [  # in order of completion
         str(tmp_path / "a" / "x.off"),
         str(tmp_path / "a" / "y.off"),
     ]
-    _, failures = compute_collection(tmp_path, Params(bins=50), jobs=1, strict=True)
+    _, failures = compute_collection(
+        tmp_path, Params(descriptor="cf", bins=50), jobs=1, strict=True
+    )
     assert len(failures) == 1
 
 
 def test_compute_collection_empty_folder(tmp_path):
     (tmp_path / "notes.txt").write_text("no meshes here")
     with pytest.raises(MeshError, match="no mesh files"):
-        compute_collection(tmp_path, Params())
+        compute_collection(tmp_path, Params(descriptor="cf"))
 
 
 def test_collection_from_index(tmp_path, build_index):

@@ -2,6 +2,7 @@ import h5py
 import numpy as np
 import pytest
 
+from cfsig.descriptors import layout
 from cfsig.errors import IndexFileError
 from cfsig.index.store import Entry, IndexReader, IndexWriter
 from cfsig.params import Params
@@ -13,7 +14,7 @@ from tests.helpers import random_signature as _sig
 def test_round_trip(tmp_path):
     hists = _build(tmp_path / "i.h5")
     with IndexReader(tmp_path / "i.h5") as r:
-        assert len(r) == 10 and r.params == Params()
+        assert len(r) == 10 and r.params == Params(descriptor="cf")
         assert np.allclose(r.signatures[:], hists, atol=1e-7)
         assert r.entries([4, 1]) == [
             Entry("c1/4.off", "c1", "/data/c1/4.off"),
@@ -25,7 +26,7 @@ def test_round_trip(tmp_path):
 def test_update_replaces_by_name(tmp_path):
     path = tmp_path / "i.h5"
     _build(path, 4)
-    with IndexWriter(path, Params()) as w:
+    with IndexWriter(path, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as w:
         w.add(Entry("c1/1.off", "c1", "/x"), _sig(99))
         w.add(Entry("new.off", "z", "/y"), _sig(5))
     with IndexReader(path) as r:  # the new row of c1/1.off supersedes the old one
@@ -41,13 +42,17 @@ def test_update_replaces_by_name(tmp_path):
 def test_other_params_refused(tmp_path):
     _build(tmp_path / "i.h5", 2)
     with pytest.raises(IndexFileError, match="other parameters"):
-        IndexWriter(tmp_path / "i.h5", Params(seed=1))
+        IndexWriter(
+            tmp_path / "i.h5",
+            Params(descriptor="cf", seed=1),
+            layout(Params(descriptor="cf", seed=1)),
+        )
 
 
 def test_second_writer_refused(tmp_path):
-    with IndexWriter(tmp_path / "i.h5", Params()):
+    with IndexWriter(tmp_path / "i.h5", Params(descriptor="cf"), layout(Params(descriptor="cf"))):
         with pytest.raises(IndexFileError, match="another process"):
-            IndexWriter(tmp_path / "i.h5", Params())
+            IndexWriter(tmp_path / "i.h5", Params(descriptor="cf"), layout(Params(descriptor="cf")))
 
 
 @pytest.mark.parametrize(
@@ -71,9 +76,9 @@ def test_bad_index_files(tmp_path, kind):
         (path / "manifest.h5").write_bytes(b"not hdf5 at all" * 100)
     with pytest.raises(IndexFileError, match=str(path)):
         IndexReader(path)
-    if kind != "missing":
+    if kind not in ("missing", "empty folder"):  # a writer makes an index in an empty folder
         with pytest.raises(IndexFileError, match=str(path)):
-            IndexWriter(path, Params())
+            IndexWriter(path, Params(descriptor="cf"), layout(Params(descriptor="cf")))
 
 
 def test_nearest_matches_brute_force(tmp_path, monkeypatch):

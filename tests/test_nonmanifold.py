@@ -12,7 +12,9 @@ from cfsig.params import Params
 from tests.helpers import disk, icosphere, open_cylinder, signature_vector, torus
 from tests.helpers import l1 as _l1
 
-AS_READ = Params(repair="off")  # each part solved as read: what the split itself gives
+AS_READ = Params(
+    descriptor="cf", repair="off"
+)  # each part solved as read: what the split itself gives
 
 
 def _sig(v, f):
@@ -85,7 +87,7 @@ def test_fin_on_an_edge(body, body_signature):
     mesh = clean_mesh(fin_v, fin_f)
     _, counts = elements.edge_face_counts(mesh.faces, len(mesh.vertices))
     assert counts.max() == 2
-    fin_sig = compute_signature(mesh, Params()).vector
+    fin_sig = compute_signature(mesh, Params(descriptor="cf")).vector
     assert np.isfinite(fin_sig).all()
     assert _l1(fin_sig, sig) < 0.1 * other
 

@@ -8,12 +8,13 @@ from click.testing import CliRunner
 
 from cfsig.cli import main
 from cfsig.descriptors import intrinsic as cfhks
+from cfsig.descriptors import layout
 from cfsig.descriptors.signature import compute_signature
 from cfsig.errors import PartialError
 from cfsig.evaluation.measures import evaluate_queries
 from cfsig.files.mesh import clean_mesh
 from cfsig.index.store import IndexReader
-from cfsig.params import Params, signature_length
+from cfsig.params import Params
 from cfsig.search.partial import (
     HISTOGRAM_WEIGHT,
     SHARES,
@@ -28,7 +29,7 @@ from cfsig.search.partial import (
 )
 from tests.helpers import icosphere, open_cylinder, torus, write_off
 
-CFHKS = Params(descriptor="cfhks")
+DEFAULT = Params()
 
 
 def _bumpy(levels=3):
@@ -46,29 +47,26 @@ def _cut(v, f, keep):
 
 
 def test_only_the_curvature_channel_takes_partial_queries():
-    columns = curvature_columns(CFHKS)
-    design = cfhks.DESIGNS[CFHKS.version]
-    assert columns.stop == design.length == signature_length(CFHKS)
-    assert columns.stop - columns.start == np.prod(cfhks.curvature_shape(design))
-    for params in (Params(), Params(descriptor="cfhks", version=2)):
-        with pytest.raises(PartialError, match="rebuild it"):
-            curvature_columns(params)
+    columns = curvature_columns(DEFAULT)
+    assert columns.stop == cfhks.LENGTH == layout(DEFAULT).length
+    assert columns.stop - columns.start == np.prod(cfhks.CURVATURE_SHAPE)
+    with pytest.raises(PartialError, match="build one with 'cfsig index FOLDER -o NEW'"):
+        curvature_columns(Params(descriptor="cf"))
 
 
-@pytest.mark.parametrize(("version", "levels"), [(5, 3), (6, 3), (7, 3), (7, 4), (9, 3), (9, 4)])
-def test_a_whole_as_its_own_part_matches_its_signature(version, levels):
-    """Up to the curvature's conjugate gradients, which start from other guesses here: to 1e-5
-    (version 5) the two agree to allclose's tolerance; to 1e-3 (versions 6, 7 and 9) within 5% of
-    the distance to another shape. Versions 7 and 9 measure a whole of more than 4000 faces (levels
-    4) on its simplified copy, and its part on the same copy: each share is solved alone, from
-    the same guesses as the whole, so the two agree."""
-    params = Params(descriptor="cfhks", version=version)
+@pytest.mark.parametrize("levels", [3, 4])
+def test_a_whole_as_its_own_part_matches_its_signature(levels):
+    """A whole of more than 4000 faces (levels 4) is measured on its simplified copy, and so is
+    its part: each share is solved alone, from the same guesses as the whole, so the two agree.
+    A smaller one up to the curvature's conjugate gradients, which start from other guesses
+    here: to 1e-3, within 5% of the distance to another shape."""
+    params = DEFAULT
     mesh = clean_mesh(*_bumpy(levels=levels))
     vectors = partial_vectors(mesh, params)
     columns = curvature_columns(params)
     assert vectors.shape == (len(SHARES), columns.stop - columns.start) and SHARES[0] == 1.0
     stored = compute_signature(mesh, params).vector[columns]
-    if version == 5 or levels == 4:
+    if levels == 4:
         assert np.allclose(vectors[0], stored)
     else:
         other = compute_signature(clean_mesh(*torus()), params).vector[columns]
@@ -77,13 +75,10 @@ def test_a_whole_as_its_own_part_matches_its_signature(version, levels):
 
 def test_share_curvatures_are_what_partial_vectors_histogram():
     mesh = clean_mesh(*_bumpy(levels=4))  # more faces than a copy: measured on copies
-    design = cfhks.DESIGNS[CFHKS.version]
-    ((values, areas),) = share_curvatures(mesh, CFHKS, (SHARES[2],))
-    assert values.shape == (len(areas), len(design.scales)) and np.all(areas > 0)
-    histograms = cfhks.curvature_histograms(values, areas, design.bins, design.band)
-    assert np.array_equal(
-        cfhks.weigh_curvature(histograms, design), partial_vectors(mesh, CFHKS)[2]
-    )
+    ((values, areas),) = share_curvatures(mesh, DEFAULT, (SHARES[2],))
+    assert values.shape == (len(areas), len(cfhks.SCALES)) and np.all(areas > 0)
+    histograms = cfhks.curvature_histograms(values, areas)
+    assert np.array_equal(cfhks.weigh_curvature(histograms), partial_vectors(mesh, DEFAULT)[2])
 
 
 def test_evaluate_queries_by_hand():
@@ -97,10 +92,10 @@ def test_evaluate_queries_by_hand():
         evaluate_queries(distances, ["c", "c"], ["a", "a", "b"])
 
 
-@pytest.fixture(scope="module", params=[9, 10])
+@pytest.fixture(scope="module", params=["columns", "cells"])
 def wholes(request, tmp_path_factory):
-    """An index of four kinds of whole shape, two of each, and parts cut from them: of version
-    9 (partial queries by the curvature channel) and 10 (by the fine cells)."""
+    """An index of four kinds of whole shape, two of each, and parts cut from them: without
+    fine cells (partial queries by the curvature columns) and with them."""
     root = tmp_path_factory.mktemp("parts")
     shapes = {
         "torus": torus(),
@@ -115,8 +110,8 @@ def wholes(request, tmp_path_factory):
         v, f = shapes[name]
         write_off(root / "parts" / name / "cut.off", *_cut(v, f, 0.3))
     index = root / "index"
-    version = ["--descriptor-version", str(request.param)]
-    result = CliRunner().invoke(main, ["index", str(root / "wholes"), "-o", str(index), *version])
+    cells = ["--partial-cells"] if request.param == "cells" else []
+    result = CliRunner().invoke(main, ["index", str(root / "wholes"), "-o", str(index), *cells])
     assert result.exit_code == 0, result.output
     return root, index
 
@@ -192,5 +187,5 @@ def test_partial_query_of_an_old_index_is_refused(tmp_path, wholes):
     assert CliRunner().invoke(main, args).exit_code == 0
     part = root / "parts" / "torus" / "cut.off"
     result = CliRunner().invoke(main, ["query", str(index), str(part), "--partial"])
-    assert result.exit_code != 0 and "rebuild it" in result.output
+    assert result.exit_code != 0 and "build one with" in result.output
     assert "Traceback" not in result.output and len(result.output.strip().splitlines()) == 1

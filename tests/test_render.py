@@ -228,7 +228,9 @@ def test_cli_without_matplotlib_says_how_to_install(monkeypatch, tmp_path, colle
     for name in ("matplotlib", "matplotlib.figure", "matplotlib.backends.backend_agg"):
         monkeypatch.setitem(sys.modules, name, None)
     mesh = str(collection / "long" / "0.off")
-    run = CliRunner().invoke(main, ["compute", mesh, "--hist", str(tmp_path / "h.png")])
+    run = CliRunner().invoke(
+        main, ["compute", mesh, "--descriptor", "cf", "--hist", str(tmp_path / "h.png")]
+    )
     assert run.exit_code == 1
     assert (
         run.output.splitlines()[-1] == "Error: pictures need matplotlib: pip install 'cfsig[plots]'"
@@ -247,6 +249,8 @@ def test_cli_compute_pictures(tmp_path, collection):
         main,
         [
             "compute",
+            "--descriptor",
+            "cf",
             str(a),
             str(b),
             "--png",

@@ -95,7 +95,7 @@ def _position_faces(v, f):
 # -- clean ------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("descriptor", ["cf", "cfhks"])
+@pytest.mark.parametrize("descriptor", ["cf", "intrinsic"])
 def test_clean_closed_manifold_is_untouched(descriptor):
     v, f = SPHERE
     mesh = clean_mesh(v, f)
@@ -128,9 +128,9 @@ def test_holes_are_closed():
     n_edges = len(mesh_edges(repaired.faces, len(repaired.vertices)).ends)
     assert len(repaired.vertices) - n_edges + len(repaired.faces) == 2
     assert _position_faces(v, holed) <= _position_faces(repaired.vertices, repaired.faces)
-    intact = compute_signature(clean_mesh(v, f), Params()).vector
-    auto = compute_signature(mesh, Params())
-    off = compute_signature(mesh, Params(repair="off"))
+    intact = compute_signature(clean_mesh(v, f), Params(descriptor="cf")).vector
+    auto = compute_signature(mesh, Params(descriptor="cf"))
+    off = compute_signature(mesh, Params(descriptor="cf", repair="off"))
     assert auto.route == "repaired" and off.route == "unrepaired"
     assert _l1(off.vector, intact) > 0.1  # the holes matter when left open
     assert _l1(auto.vector, intact) < 0.2 * _l1(off.vector, intact)
@@ -153,9 +153,9 @@ def test_parts_with_a_small_gap_are_zipped(shape):
 def test_zipped_sphere_signature_is_close_to_the_intact_one():
     v, f = SPHERE
     mesh = clean_mesh(*_gapped(v, f))
-    intact = compute_signature(clean_mesh(v, f), Params()).vector
-    auto = compute_signature(mesh, Params())
-    off = compute_signature(mesh, Params(repair="off"))
+    intact = compute_signature(clean_mesh(v, f), Params(descriptor="cf")).vector
+    auto = compute_signature(mesh, Params(descriptor="cf"))
+    off = compute_signature(mesh, Params(descriptor="cf", repair="off"))
     assert auto.route == "repaired" and auto.n_components == 1 and off.n_components == 2
     assert _l1(auto.vector, intact) < 0.2 * _l1(off.vector, intact)
 
@@ -188,9 +188,9 @@ def test_overlapping_parts_are_trimmed():
     assert repaired.route == "repaired"
     assert _has(repaired, "lying on another part's surface")
     assert _one_closed_manifold(repaired)
-    intact = compute_signature(clean_mesh(v, f), Params()).vector
-    off = compute_signature(mesh, Params(repair="off")).vector
-    auto = compute_signature(mesh, Params()).vector
+    intact = compute_signature(clean_mesh(v, f), Params(descriptor="cf")).vector
+    off = compute_signature(mesh, Params(descriptor="cf", repair="off")).vector
+    auto = compute_signature(mesh, Params(descriptor="cf")).vector
     assert _l1(auto, intact) < 0.2 * _l1(off, intact)
 
 
@@ -221,8 +221,8 @@ def test_fin_and_stray_fragment_are_dropped():
     assert repaired.route == "repaired"
     assert _has(repaired, "dropped 2 small open fragments")
     assert _one_closed_manifold(repaired) and len(repaired.faces) == len(f)
-    clean = compute_signature(clean_mesh(v, f), Params())
-    fixed = compute_signature(mesh, Params())
+    clean = compute_signature(clean_mesh(v, f), Params(descriptor="cf"))
+    fixed = compute_signature(mesh, Params(descriptor="cf"))
     assert fixed.route == "repaired"
     assert _l1(fixed.vector, clean.vector) < 1e-9
     np.testing.assert_allclose(fixed.phi, clean.phi, rtol=0, atol=1e-9)
@@ -236,8 +236,8 @@ def test_too_many_parts_go_to_the_proxy(monkeypatch):
 
 @pytest.mark.parametrize(
     ("descriptor", "inner_first"),
-    [("cf", False), ("cf", True), ("cfhks", False)],
-    ids=["cf", "cf-inner-first", "cfhks"],
+    [("cf", False), ("cf", True), ("intrinsic", False)],
+    ids=["cf", "cf-inner-first", "intrinsic"],
 )
 def test_hidden_inner_part_is_dropped(descriptor, inner_first):
     v, f = SPHERE
@@ -295,7 +295,7 @@ def test_interpenetrating_parts_take_the_proxy():
     low, high = proxy.vertices.min(axis=0), proxy.vertices.max(axis=0)
     assert np.all(low <= [-1, -1, -1]) and np.all(low > np.array([-1, -1, -1]) - grown)
     assert np.all(high >= [2.2, 1, 1]) and np.all(high < np.array([2.2, 1, 1]) + grown)
-    sig = compute_signature(mesh, Params())
+    sig = compute_signature(mesh, Params(descriptor="cf"))
     assert sig.route == "proxy" and sig.n_components == 1 and np.isfinite(sig.vector).all()
 
 
@@ -324,7 +324,7 @@ def test_off_mode_leaves_the_mesh_as_read():
     result = repair_mesh(mesh, "off")
     assert result.route == "unrepaired" and result.repairs == mesh.repairs
     assert result.vertices is mesh.vertices and result.faces is mesh.faces
-    sig = compute_signature(mesh, Params(repair="off"))
+    sig = compute_signature(mesh, Params(descriptor="cf", repair="off"))
     assert sig.route == "unrepaired" and sig.n_components == 2
 
 
@@ -367,7 +367,7 @@ def test_proxy_past_its_memory_limit(tmp_path):
 def test_limit_error_names_the_file(tmp_path):
     path = write_off(tmp_path / "two.off", *_interpenetrating())
     with pytest.raises(StageLimitError) as info:  # the type is kept, the file named
-        signature_file(path, Params(), limits=TINY)
+        signature_file(path, Params(descriptor="cf"), limits=TINY)
     message = str(info.value)
     assert message.startswith(f"{path}: ") and "longer than 0.001 s" in message
     assert "\n" not in message
@@ -377,11 +377,12 @@ def test_batch_goes_on_past_a_limit(tmp_path):
     slow = write_off(tmp_path / "two.off", *_interpenetrating())
     good = write_off(tmp_path / "sphere.off", *SPHERE)
     outcomes = {
-        Path(o.path).name: o for o in compute_many([slow, good], Params(), jobs=1, limits=TINY)
+        Path(o.path).name: o
+        for o in compute_many([slow, good], Params(descriptor="cf"), jobs=1, limits=TINY)
     }
     assert sorted(outcomes) == ["sphere.off", "two.off"]
     assert outcomes["sphere.off"].error == ""
-    expected = signature_file(good, Params())
+    expected = signature_file(good, Params(descriptor="cf"))
     assert np.array_equal(outcomes["sphere.off"].signature.vector, expected.vector)
     failed = outcomes["two.off"]
     assert failed.signature is None
@@ -414,18 +415,10 @@ def test_stage_timeout_option_reaches_every_command(tmp_path):
 # -- parameters -------------------------------------------------------------------------------
 
 
-def test_params_of_an_index_from_before_the_repair_stage():
-    old = json.loads(Params().to_json())
-    del old["repair"]
-    assert Params.from_json(json.dumps(old)).repair == "off"
-    assert Params.from_json(Params(repair="proxy").to_json()).repair == "proxy"
-    assert Params().repair == "auto"
-
-
 def test_unknown_repair_mode_in_params():
     with pytest.raises(ValueError, match="unknown repair mode"):
-        Params(repair="always")
-    bad = json.loads(Params().to_json())
+        Params(descriptor="cf", repair="always")
+    bad = json.loads(Params(descriptor="cf").to_json())
     bad["repair"] = "always"
     with pytest.raises(ValueError, match="unknown repair mode"):
         Params.from_json(json.dumps(bad))

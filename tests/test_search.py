@@ -7,6 +7,7 @@ import pytest
 import cfsig.index.segments
 import cfsig.search.l1
 import cfsig.search.nearest
+from cfsig.descriptors import layout
 from cfsig.descriptors.signature import Signature
 from cfsig.errors import IndexFileError
 from cfsig.index.blocks import plan_blocks, read_block, read_columns
@@ -37,7 +38,7 @@ def _brute_nearest(queries, rows, k):
 def _build(path, hists, chunk_rows, monkeypatch):
     monkeypatch.setattr(cfsig.index.segments, "_CHUNK_ROWS", chunk_rows)
     phi = np.zeros(1)
-    with IndexWriter(path, Params()) as w:
+    with IndexWriter(path, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as w:
         for i, h in enumerate(hists):
             sig = Signature(h, phi, 3, 1, 1, 0.0, (), 0.0, f"{i:064d}")
             w.add(Entry(f"m{i}.off", f"c{i % 4}", f"/d/m{i}.off"), sig)
@@ -202,7 +203,7 @@ def test_a_file_cut_short_after_opening_is_a_clear_error(tmp_path, monkeypatch):
 
 def test_empty_index_and_k_zero(tmp_path):
     path = tmp_path / "i.h5"
-    with IndexWriter(path, Params()):
+    with IndexWriter(path, Params(descriptor="cf"), layout(Params(descriptor="cf"))):
         pass
     with IndexReader(path) as r:
         rows, dist = nearest(r, _histograms(2, 9), 5)

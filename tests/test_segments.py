@@ -1,6 +1,7 @@
 """Format 2: segments and merges, superseded rows, checksums and `cfsig check`, kills during a
-commit and a compaction, format-1 files read and converted."""
+commit and a compaction, older formats refused."""
 
+import json
 import signal
 import subprocess
 import sys
@@ -14,11 +15,12 @@ from click.testing import CliRunner
 
 import cfsig.index.store
 from cfsig.cli import main
+from cfsig.descriptors import layout
 from cfsig.errors import IndexFileError
-from cfsig.index.store import Entry, IndexReader, IndexWriter, check_index, convert_index
+from cfsig.index.store import Entry, IndexReader, IndexWriter, check_index
 from cfsig.params import Params
 from cfsig.search.nearest import l1_distances, nearest
-from tests.helpers import random_signature
+from tests.helpers import icosphere, random_signature, write_off
 
 
 def _add(writer, names, seed=0):
@@ -40,7 +42,7 @@ def _contents(index):
 def test_commits_append_segments_merge_and_supersede(tmp_path, monkeypatch):
     monkeypatch.setattr(cfsig.index.store, "MERGE_FANOUT", 3)
     index, want = tmp_path / "i", {}
-    with IndexWriter(index, Params()) as w:
+    with IndexWriter(index, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as w:
         for c in range(10):  # one segment per commit, merged three at a time
             want.update(_add(w, [f"c{c % 3}/{c}-{i}.off" for i in range(4)], seed=100 * c))
             if c % 4 == 3:  # names of older segments again: their new rows supersede the old
@@ -62,7 +64,10 @@ def test_commits_append_segments_merge_and_supersede(tmp_path, monkeypatch):
     brute = l1_distances(queries, rows)
     assert [[names[i] for i in np.argsort(b, kind="stable")[:7]] for b in brute] == hits
     assert np.allclose(dist, np.sort(brute, axis=1)[:, :7], atol=1e-5)
-    with IndexReader(index) as before, IndexWriter(index, Params()) as w:
+    with (
+        IndexReader(index) as before,
+        IndexWriter(index, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as w,
+    ):
         w.compact()
         assert len(w.segments) == 1 and w.segments[0].rows == len(want)
         assert np.array_equal(nearest(before, queries, 7)[0], found)  # still the old files
@@ -110,7 +115,7 @@ def test_check_names_what_is_damaged(tmp_path, part, build_index):
     assert any(f"{want}: checksum mismatch" in line for line in problems), problems
     bad = CliRunner().invoke(main, ["check", str(index)])
     assert bad.exit_code == 1 and want in bad.output and "Traceback" not in bad.output
-    with IndexWriter(index, Params()) as w:
+    with IndexWriter(index, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as w:
         _add(w, ["new/x.off"])
         with pytest.raises(IndexFileError, match="checksum mismatch"):
             w.compact()  # a merge does not copy damage into a new segment
@@ -120,11 +125,13 @@ def test_check_names_what_is_damaged(tmp_path, part, build_index):
 _WRITE = textwrap.dedent(
     """
     import sys
+    from cfsig.descriptors import layout
     from cfsig.index.store import Entry, IndexWriter
     from cfsig.params import Params
-    from tests.helpers import random_signature
+    from tests.helpers import icosphere, random_signature, write_off
     index, what = sys.argv[1], sys.argv[2]
-    with IndexWriter(index, Params(bins=16), merge=False) as w:
+    params = Params(descriptor="cf", bins=16)
+    with IndexWriter(index, params, layout(params), merge=False) as w:
         if what == "compact":
             w.compact()
         else:
@@ -193,49 +200,58 @@ def test_sigkill_during_commits_and_compaction_loses_nothing(tmp_path):
     with IndexReader(index) as r:
         assert len(r.segments) == 1
     assert set(_contents(index)) == everything
-    assert {p.name for p in index.iterdir()} == {"manifest.h5", f"seg-{_last(index):08d}.h5"}
+    assert {p.name for p in index.iterdir()} == {
+        "manifest.h5",
+        "lock",
+        f"seg-{_last(index):08d}.h5",
+    }
 
 
 def _last(index):
     return cfsig.index.store.read_manifest(index).segments[-1].id
 
 
-def _format_1(path, n):
-    """A format-1 index file as cfsig wrote them before format 2."""
-    sigs = np.array([random_signature(i).vector for i in range(n)], np.float32)
+def _format_1(path):
+    """An index of the one-file format 1, as cfsig 0.1 wrote them before format 2: only its
+    header is read."""
     with h5py.File(path, "w") as f:
-        f.attrs.update(format="cfsig-index", format_version=1, params=Params().to_json())
-        f.create_dataset("signatures", data=sigs, maxshape=(None, 200), chunks=(4096, 200))
-        text = h5py.string_dtype("utf-8")
-        f.create_dataset("names", data=[f"c/{i}.off" for i in range(n)], dtype=text)
-        f.create_dataset("labels", data=["c"] * n, dtype=text)
-        f.create_dataset("paths", data=[f"/c/{i}.off" for i in range(n)], dtype=text)
-        f.create_dataset("sha256", data=np.array([b"0" * 64] * n, "S64"))
-        for key in ("n_vertices", "n_faces", "n_components"):
-            f.create_dataset(key, data=np.ones(n, np.int64))
-        for key in ("phi_min", "phi_max", "curvature_error"):
-            f.create_dataset(key, data=np.zeros(n))
-    return sigs
+        f.attrs.update(format="cfsig-index", format_version=1, params='{"bins": 200}')
+        f.create_dataset("signatures", data=np.zeros((2, 200), np.float32))
 
 
-def test_format_1_is_read_and_converted(tmp_path):
-    old, new = tmp_path / "old.h5", tmp_path / "new"
-    sigs = _format_1(old, 12)
-    with IndexReader(old) as r:
-        assert len(r) == 12 and r.entries([3])[0] == Entry("c/3.off", "c", "/c/3.off")
-        rows, _ = nearest(r, sigs[[5]], 3)
-    assert rows[0, 0] == 5
-    with pytest.raises(IndexFileError, match="cfsig convert"):
-        IndexWriter(old, Params())
-    result = CliRunner().invoke(main, ["index", str(tmp_path), "-o", str(old)])
-    assert result.exit_code == 1 and "convert it with" in result.output
-    with pytest.raises(IndexFileError, match="format-1 index has no checksums"):
-        check_index(old)
-    result = CliRunner().invoke(main, ["convert", str(old), str(new)])
-    assert result.exit_code == 0 and "12 entries converted" in result.output, result.output
-    assert check_index(new) == []
-    with IndexReader(new) as r:
-        assert np.array_equal(r.signatures[:], sigs) and list(r.column("names"))[3] == "c/3.off"
-        assert np.array_equal(nearest(r, sigs[[5]], 3)[0], rows)
-    with pytest.raises(IndexFileError, match="already exists"):
-        convert_index(old, new)
+def _format_2(folder, params):
+    """An index folder of format 2, as cfsig 0.1 wrote them, made with ``params``."""
+    folder.mkdir()
+    with h5py.File(folder / "manifest.h5", "w") as f:
+        f.attrs.update(format="cfsig-index", format_version=2, params=json.dumps(params))
+
+
+V10 = {"descriptor": "cfhks", "version": 10, "bins": 200, "repair": "auto"}
+
+
+@pytest.mark.parametrize(
+    ("make", "named"),
+    [
+        (_format_1, "descriptor cf that"),
+        (lambda path: _format_2(path, V10), "descriptor cfhks version 10"),
+        (lambda path: _format_2(path, dict(V10, descriptor="cf", version=1)), "cf version 1"),
+    ],
+    ids=["format 1", "format 2, a removed version", "format 2, cf"],
+)
+def test_older_indexes_are_refused_with_the_command_that_rebuilds_them(tmp_path, make, named):
+    old = tmp_path / "old"
+    make(old)
+    before = sorted(p.name for p in old.iterdir()) if old.is_dir() else old.read_bytes()
+    rebuild = "rebuild it: cfsig index FOLDER -o NEW_INDEX"
+    for open_it in (IndexReader, check_index, lambda p: IndexWriter(p, Params())):
+        with pytest.raises(IndexFileError, match=f"made by an older cfsig.*{named}.*{rebuild}"):
+            open_it(old)
+    mesh = tmp_path / "m" / "c" / "s.off"
+    write_off(mesh, *icosphere(2))
+    for args in (["query", old, mesh], ["index", mesh.parent, "-o", old], ["check", old]):
+        result = CliRunner().invoke(main, [str(a) for a in args])
+        assert result.exit_code == 1 and "Traceback" not in result.output
+        (line,) = result.output.strip().splitlines()
+        assert line.startswith(f"Error: {old}: made by an older cfsig") and line.endswith(rebuild)
+    after = sorted(p.name for p in old.iterdir()) if old.is_dir() else old.read_bytes()
+    assert after == before  # nothing written into it, no lock file left

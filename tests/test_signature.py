@@ -2,7 +2,8 @@ import igl
 import numpy as np
 import pytest
 
-from cfsig.descriptors.signature import compute_signature, histogram, sample_phi
+from cfsig.descriptors.cf import histogram, sample_phi
+from cfsig.descriptors.signature import compute_signature
 from cfsig.files import elements
 from cfsig.files.demo import limbed_body
 from cfsig.files.mesh import clean_mesh
@@ -28,7 +29,7 @@ def test_histogram_sums_to_one_and_is_deterministic(body):
 
 
 def test_bins_centred_on_integers():
-    params = Params()
+    params = Params(descriptor="cf")
     h = histogram(np.array([-0.49, 0.0, 0.49, 0.51, -500.0, 500.0]), params)
     assert h[99] == pytest.approx(3 / 6)  # bin 99 is centred on 0: [-0.5, 0.5)
     assert h[100] == pytest.approx(1 / 6)
@@ -78,7 +79,7 @@ def test_noise_keeps_signature_close(body, reference):
 
 
 def test_normalized_variant(body):
-    params = Params(normalize=True)
+    params = Params(descriptor="cf", normalize=True)
     cf = compute_signature(clean_mesh(*body), params)
     assert cf.vector.sum() == pytest.approx(1.0)
     assert cf.vector[0] > 0 and cf.vector[-1] > 0  # min and max phi land in the end bins
@@ -100,6 +101,6 @@ def test_samples_reproducible_and_seeded():
 
 
 def test_histogram_bin_edges_and_far_values():
-    params = Params(bins=4, low=0.0, high=4.0)
+    params = Params(descriptor="cf", bins=4, low=0.0, high=4.0)
     hist = histogram(np.array([-10.0, 0.0, 0.99, 1.0, 2.5, 3.99, 4.0, 1e30]), params)
     assert np.array_equal(hist * 8, [3, 1, 1, 3])

@@ -12,6 +12,7 @@ import pytest
 import cfsig.index.segments
 import cfsig.index.store
 import cfsig.search.nearest
+from cfsig.descriptors import layout
 from cfsig.descriptors.signature import Signature
 from cfsig.errors import IndexFileError
 from cfsig.index.sketch import (
@@ -25,11 +26,11 @@ from cfsig.index.sketch import (
     threshold,
 )
 from cfsig.index.store import Entry, IndexReader, IndexWriter, check_index, compact_index, file_crc
-from cfsig.params import Params, curvature_slice, signature_length
+from cfsig.params import Params
 from cfsig.search.nearest import nearest
 
-CFHKS = Params(descriptor="cfhks")
-WIDTH = signature_length(CFHKS)
+DEFAULT = Params()
+WIDTH = layout(DEFAULT).length
 
 
 def _structured(n, seed, width=WIDTH):
@@ -55,7 +56,7 @@ def _ties(n, seed, width=WIDTH):
 
 def _write(index, rows, names, seed=0):
     phi = np.zeros(1)
-    with IndexWriter(index, CFHKS, merge=False) as w:
+    with IndexWriter(index, DEFAULT, layout(DEFAULT), merge=False) as w:
         for name, row in zip(names, rows, strict=True):
             sig = Signature(row, phi, 1, 1, 1, 0.0, (), "clean", 0.0, "")
             w.add(Entry(name, "c", f"/d/{name}"), sig)
@@ -138,11 +139,6 @@ def _strip_sketches(index):
     _strip(index, ("sketch", *cfsig.index.segments.SKETCH_EXTRA))
 
 
-def _strip_copy(index):
-    """Remove the curvature copy of an index's last segment, and record its new checksum."""
-    _strip(index, ("curvature", *cfsig.index.segments.CURVATURE_EXTRA))
-
-
 def _strip(index, keys):
     """Remove some datasets of an index's last segment, as code from before them wrote it."""
     manifest = cfsig.index.store.read_manifest(index)
@@ -213,7 +209,8 @@ def test_check_finds_a_flipped_byte_in_the_sketches_and_the_copy(tmp_path, part)
 
 
 @pytest.mark.parametrize(
-    ("key", "what"), [("sketch_center", "sketches"), ("curvature_columns", "curvature copy")]
+    ("key", "what"),
+    [("sketch_center", "sketches"), ("curvature_columns", "copy of the columns 'curvature'")],
 )
 def test_derived_data_that_does_not_fit_its_rows_is_refused(tmp_path, key, what):
     _write(tmp_path / "i", _structured(40, 9), [f"c/{i}.off" for i in range(40)])
@@ -232,9 +229,8 @@ def test_derived_data_that_does_not_fit_its_rows_is_refused(tmp_path, key, what)
 
 def test_a_search_of_the_curvature_reads_the_copy(tmp_path, monkeypatch, small_blocks, kernel):
     rows, queries = np.split(_structured(305, 10), [300])
-    index, columns = tmp_path / "i", curvature_slice(CFHKS)
+    index, columns = tmp_path / "i", layout(DEFAULT).group("curvature")
     _write(index, rows[:150], [f"a/{i}.off" for i in range(150)])
-    _strip_copy(index)  # as code from before the copy wrote it
     _write(
         index, rows[150:] + 0.5, [f"a/{i}.off" for i in range(20)] + [f"b/{i}" for i in range(130)]
     )
@@ -246,13 +242,12 @@ def test_a_search_of_the_curvature_reads_the_copy(tmp_path, monkeypatch, small_b
         lambda d, *a: read.append(d.file.filename) or real(d, *a),
     )
     with IndexReader(index) as r:
-        first, second = r.segments
-        assert first.curvature is None and second.curvature is not None
-        assert np.array_equal(second.curvature.rows[:], second.signatures[:, columns])
+        for view in r.segments:
+            (copy,) = view.copies
+            assert np.array_equal(copy.rows[:], view.signatures[:, columns])
         got_rows, got = nearest(r, queries[:, columns], 9, columns)
         stored = r.signatures[:]
-    manifest = cfsig.index.store.read_manifest(index)
-    assert set(read) == {str(index / manifest.segments[0].file)}  # rows only where no copy
+    assert read == []  # the copies only, never the rows
     brute = np.abs(queries[:, None, columns] - stored[None, :, columns]).sum(axis=2)
     assert np.allclose(got, np.sort(brute, axis=1)[:, :9], rtol=1e-5)
     assert np.allclose(got, np.take_along_axis(brute, got_rows, axis=1), rtol=1e-5)
@@ -260,5 +255,5 @@ def test_a_search_of_the_curvature_reads_the_copy(tmp_path, monkeypatch, small_b
     compact_index(index)  # the merged segment has a copy of every row
     with IndexReader(index) as r:
         (only,) = r.segments
-        assert np.array_equal(only.curvature.rows[:], only.signatures[:, columns])
+        assert np.array_equal(only.copies[0].rows[:], only.signatures[:, columns])
         assert np.array_equal(nearest(r, queries[:, columns], 9, columns)[1], got)

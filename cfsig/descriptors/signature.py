@@ -1,10 +1,5 @@
-"""The signature: a histogram of phi sampled uniformly over the surface (paper section 2.3).
-
-It is the ``cf`` descriptor; `signature_of` also makes the other descriptors of `DESCRIPTORS`
-(docs/descriptors.md). Every descriptor is a vector whose L1 distance is the descriptor's
-distance. The conformal factor is solved when the descriptor's vector holds it (`needs_phi`) or
-when a caller asks for it.
-"""
+"""The signature of a mesh: repaired, measured by its descriptor (`cfsig.descriptors`), with the
+facts reported about it."""
 
 from __future__ import annotations
 
@@ -15,17 +10,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from cfsig.descriptors.cells import Cells
-from cfsig.descriptors.intrinsic import cfhks_vector, copy_vector, solves_phi
+from cfsig import descriptors
+from cfsig.descriptors.base import Cells
 from cfsig.errors import MeshError, SolverError
 from cfsig.files.mesh import Mesh, parse_mesh, read_bytes
 from cfsig.isolate import Limits
 from cfsig.operators.conformal import (
-    ConformalFactor,
-    Operators,
     conformal_factor,
     mesh_components,
-    operators,
 )
 from cfsig.params import Params
 from cfsig.repair.stage import repair_mesh
@@ -37,11 +29,12 @@ class Signature:
 
     Attributes
     ----------
-    vector : (signature_length(params),) float64
-        The signature vector: for ``cf`` the histogram of phi, summing to 1; for another
-        descriptor its vector (`signature_of`).
+    vector : (layout.length,) float64
+        The descriptor's vector (`cfsig.descriptors`): its L1 distance to another compares the
+        two shapes.
     phi : (n,) float64 or None
-        Conformal factor per vertex; None when it was not solved (`needs_phi`).
+        Conformal factor per vertex; None when it was not solved (the descriptor does not need
+        it and it was not asked for).
     n_vertices, n_faces, n_components : int
         Size of the mesh after repairs.
     curvature_error : float
@@ -57,7 +50,7 @@ class Signature:
         Hash of the file's bytes ("" for an in-memory mesh).
     cells : Cells or None
         The fine curvature cells kept beside the vector for partial queries
-        (`cfsig.descriptors.cells.packed_cells`), by ``cfhks`` version 10 and later; None otherwise.
+        (`cfsig.descriptors.cells.packed_cells`), when `Params.partial_cells`; None otherwise.
     """
 
     vector: np.ndarray
@@ -78,151 +71,6 @@ class Signature:
         if self.phi is None:
             return float("nan"), float("nan")
         return float(self.phi.min()), float(self.phi.max())
-
-
-def sample_phi(
-    faces: np.ndarray, areas: np.ndarray, phi: np.ndarray, count: int, seed: int
-) -> np.ndarray:
-    """Sample phi at points drawn uniformly over the surface (paper section 2.3).
-
-    Each sample falls in a face with probability proportional to its area, at a uniform point
-    inside it; phi there is the barycentric interpolation of its corners' values. The face draws
-    are made as ``count`` sorted uniform numbers against the cumulative areas, which gives each
-    face its number of samples in one pass (the same distribution as drawing the samples one by
-    one, without a random-access search per sample).
-
-    Parameters
-    ----------
-    faces : (m, 3) int64
-        Triangles.
-    areas : (m,) float64
-        Face areas.
-    phi : (n,) float64
-        Values at the vertices.
-    count : int
-        Number of samples.
-    seed : int
-        Seed of NumPy's PCG64 generator: the same inputs give the same samples bit for bit.
-
-    Returns
-    -------
-    samples : (count,) float64
-        Interpolated phi values, grouped by face in face order.
-    """
-    rng = np.random.default_rng(seed)
-    cumulative = np.cumsum(areas)
-    draws = rng.random(count)
-    draws.sort()
-    draws *= cumulative[-1]
-    ends = np.searchsorted(draws, cumulative, side="right")
-    ends[-1] = count  # a draw rounded up to the total area still belongs to the last face
-    face = np.repeat(np.arange(len(faces)), np.diff(ends, prepend=0))
-    corner = phi[faces]
-    # phi = c0 + r1 ((c1 - c0) + r2 (c2 - c1)) with r1 = sqrt(u1), r2 = u2 (uniform points)
-    r1 = np.sqrt(rng.random(count))
-    samples = rng.random(count)
-    samples *= (corner[:, 2] - corner[:, 1])[face]
-    samples += (corner[:, 1] - corner[:, 0])[face]
-    samples *= r1
-    samples += corner[:, 0][face]
-    return samples
-
-
-def histogram(values: np.ndarray, params: Params) -> np.ndarray:
-    """Histogram with uniform bins, out-of-range values counted in the end bins.
-
-    Parameters
-    ----------
-    values : (k,) float64
-        Samples.
-    params : Params
-        Gives the number of bins and the outer edges (`Params.edges`).
-
-    Returns
-    -------
-    hist : (bins,) float64
-        Fractions of the samples per bin, summing to 1.
-    """
-    low, high = params.edges
-    position = values - low
-    position *= params.bins / (high - low)
-    np.clip(position, 0, params.bins - 1, out=position)
-    index = position.astype(np.intp)  # truncation is the floor once clipped to >= 0
-    return np.bincount(index, minlength=params.bins) / len(values)
-
-
-def needs_phi(params: Params) -> bool:
-    """Whether the signatures that ``params`` make hold the conformal factor.
-
-    Parameters
-    ----------
-    params : Params
-        Signature parameters.
-
-    Returns
-    -------
-    needs : bool
-        True for ``cf`` and ``cfhks`` version 1 (`cfhks.solves_phi`).
-    """
-    return params.descriptor == "cf" or solves_phi(params.version or 0)
-
-
-def signature_of(
-    mesh: Mesh,
-    ops: Operators,
-    params: Params,
-    cf: ConformalFactor | None = None,
-    solver: str = "auto",
-) -> np.ndarray:
-    """The signature vector of a mesh, for ``params.descriptor``.
-
-    Parameters
-    ----------
-    mesh : Mesh
-        The mesh.
-    ops : Operators
-        Its operators (`conformal.operators`).
-    params : Params
-        Signature parameters.
-    cf : ConformalFactor or None
-        Its conformal factor (`conformal_factor`), needed when `needs_phi`.
-    solver : {"auto", "cholmod", "eigen", "scipy"}
-        Sparse solver backend of the factorisations ``cfhks`` makes.
-
-    Returns
-    -------
-    signature : (signature_length(params),) float64
-        For ``cf``: the histogram of phi at ``samples_per_face * m`` surface samples plus the
-        vertices, summing to 1. For ``cfhks``: `cfhks.cfhks_vector`.
-
-    Raises
-    ------
-    SolverError
-        ``cfhks`` only: a factorisation, the eigenvalue iteration or a diffusion failed.
-    ValueError
-        ``cf`` is None and `needs_phi`.
-    """
-    return _vector_and_cells(mesh, ops, params, cf, solver)[0]
-
-
-def _vector_and_cells(
-    mesh: Mesh, ops: Operators, params: Params, cf: ConformalFactor | None, solver: str
-) -> tuple[np.ndarray, Cells | None]:
-    """`signature_of`, and the fine cells of the ``cfhks`` versions that keep them."""
-    if params.descriptor == "cfhks":
-        assert params.version is not None  # resolved by Params.__post_init__
-        return cfhks_vector(mesh, ops, params.version, cf, solver)
-    if cf is None:
-        raise ValueError("the cf descriptor is a histogram of phi: give its conformal factor")
-    phi = cf.phi
-    if params.normalize:
-        span = np.ptp(phi)
-        phi = (phi - phi.min()) / span if span > 0 else np.zeros_like(phi)
-    faces = mesh.faces
-    samples = sample_phi(
-        faces, ops.face_areas, phi, params.samples_per_face * len(faces), params.seed
-    )
-    return histogram(np.concatenate([samples, phi]), params), None
 
 
 def compute_signature(
@@ -268,18 +116,17 @@ def _repair_and_sign(
     """`compute_signature`, also returning the repaired mesh that phi lives on."""
     start = time.perf_counter()
     mesh = repair_mesh(mesh, params.repair, limits)
-    cf = conformal_factor(mesh, params.mollify, solver) if phi or needs_phi(params) else None
-    ops, found, repairs = None, None, mesh.repairs
-    if cf is None and params.descriptor == "cfhks":
-        assert params.version is not None  # resolved by Params.__post_init__
-        found = copy_vector(mesh, params.version, solver)  # no need for the mesh's operators
-    if found is None:
-        ops = operators(mesh, params.mollify) if cf is None else cf.operators
-        found = _vector_and_cells(mesh, ops, params, cf, solver)
-        if ops.mollified > 0:
-            repairs += (f"mollified degenerate triangles (edges +{ops.mollified:.3g})",)
+    descriptor = descriptors.get(params.descriptor)
+    needs_phi = phi or descriptor.needs_phi
+    cf = conformal_factor(mesh, params.mollify, solver) if needs_phi else None
+    vector, cells, ops = descriptor.compute(mesh, params, cf, solver)
+    if ops is None and cf is not None:
+        ops = cf.operators
+    repairs = mesh.repairs
+    if ops is not None and ops.mollified > 0:
+        repairs += (f"mollified degenerate triangles (edges +{ops.mollified:.3g})",)
     return mesh, Signature(
-        found[0],
+        vector,
         None if cf is None else cf.phi,
         len(mesh.vertices),
         len(mesh.faces),
@@ -288,7 +135,7 @@ def _repair_and_sign(
         repairs,
         mesh.route,
         time.perf_counter() - start,
-        cells=found[1],
+        cells=cells,
     )
 
 

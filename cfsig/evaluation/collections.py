@@ -3,7 +3,8 @@
 A `Collection` holds the signatures of labelled meshes for one descriptor, computed from a
 folder (`compute_collection`) or read from an index (`collection_from_index`);
 `evaluate_collections` evaluates one or several of them side by side on the same meshes with
-the measures of `cfsig.evaluation.measures`, the classes taken from the folders or from a `.cla` file
+the measures of `cfsig.evaluation.measures`, the classes taken from the folders or from a `.cla`
+file
 (`cfsig.files.cla`).
 """
 
@@ -16,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cfsig import descriptors
 from cfsig.batch import Progress, compute_many, successes
 from cfsig.errors import MeshError
 from cfsig.evaluation.measures import RetrievalReport, evaluate_distances, evaluate_queries
@@ -23,7 +25,7 @@ from cfsig.files.cla import labels_from_cla
 from cfsig.files.folders import find_meshes, mesh_label
 from cfsig.index.store import IndexReader
 from cfsig.isolate import Limits
-from cfsig.params import Params, signature_length
+from cfsig.params import Params
 from cfsig.search.nearest import l1_distances
 from cfsig.search.partial import curvature_columns, expanded_distances, partial_file
 
@@ -186,7 +188,9 @@ def compute_collection(
         names,
         tuple(mesh_label(path) for path in order),
         tuple(str(folder / name) for name in names),
-        rows.reshape(len(order), signature_length(params)),  # (0, length) if every file failed
+        rows.reshape(
+            len(order), descriptors.layout(params).length
+        ),  # (0, length) if every file failed
         np.array([signatures[path].seconds for path in order], dtype=float),
     )
     return collection, failures

@@ -1,6 +1,7 @@
 """Pictures: meshes coloured by phi, signature histograms, precision/recall curves, result grids.
 
-The meshes are drawn by `cfsig.figures.raster`; matplotlib (Agg, imported inside the functions that need
+The meshes are drawn by `cfsig.figures.raster`; matplotlib (Agg, imported inside the functions that
+need
 it) only lays out and draws images, text, colour bars and plots, and Pillow (which matplotlib
 installs) writes them as RGB PNG files. `write_ply` exports phi on a mesh through trimesh, for
 MeshLab or Blender. Same input, same bytes: nothing depends on the time, the display or the

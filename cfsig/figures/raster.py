@@ -1,7 +1,8 @@
 """The rasteriser: meshes drawn lit and shaded, coloured by a value per vertex or plain clay.
 
 A small z-buffer in numpy: orthographic view, per-pixel interpolation of the value and of the
-vertex normals, Lambert shading, 2x2 supersampling. It returns RGBA arrays; `cfsig.figures.plots` lays
+vertex normals, Lambert shading, 2x2 supersampling. It returns RGBA arrays; `cfsig.figures.plots`
+lays
 them out in pictures. Same input, same pixels: nothing depends on the time, the display or the
 random state.
 """

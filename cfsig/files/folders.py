@@ -10,13 +10,14 @@ import os
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
+# Binary glTF (.glb) is how most models on the web ship; a glTF or 3MF file is a scene of parts.
+MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl", ".glb", ".gltf", ".3mf")
 
 
 def find_meshes(paths: Iterable[str | os.PathLike]) -> Iterator[tuple[Path, str]]:
     """Mesh files under some files and folders, in a stable order, with their names.
 
-    Folders are walked recursively (sorted, hidden entries skipped) for OFF, OBJ, PLY and STL
+    Folders are walked recursively (sorted, hidden entries skipped) for the `MESH_SUFFIXES`
     files; a file given directly is taken whatever its extension, so that reading it reports
     what is wrong with it.
 

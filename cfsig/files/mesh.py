@@ -1,7 +1,9 @@
-"""Reading and repairing triangle meshes: OFF, OBJ, PLY and STL files to checked numpy arrays."""
+"""Reading and repairing triangle meshes: OFF, OBJ, PLY, STL, glTF and 3MF files to checked numpy
+arrays."""
 
 from __future__ import annotations
 
+import importlib.util
 import io
 import os
 import warnings
@@ -11,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from cfsig.errors import MeshError, MissingDependencyError
 from cfsig.files.elements import Edges, mesh_edges
@@ -20,6 +23,11 @@ from cfsig.files.folders import MESH_SUFFIXES
 # 1e+-77: larger coordinates overflow, a smaller span underflows. The bounds keep a wide margin;
 # tests/test_bad_input.py checks every descriptor and partial queries just inside them.
 MAX_COORDINATE = 1e50
+# Formats of scenes, whose parts are placed by their nodes' transforms, and how close (relative
+# to the bounding box's diagonal) two of their vertices are taken as one: float32's rounding of
+# a coordinate, about 6e-8 of it, times a few for the transform.
+SCENE_SUFFIXES = (".glb", ".gltf", ".3mf")
+WELD_TOLERANCE = 1e-6
 MIN_SPAN = 1e-50
 
 
@@ -36,13 +44,15 @@ class Mesh:
     repairs : tuple of str
         What was repaired on reading, in words (empty for a clean mesh).
     edges : geometry.Edges or None
-        The faces' `cfsig.files.elements.mesh_edges`, kept from the non-manifold check of `clean_mesh` so
+        The faces' `cfsig.files.elements.mesh_edges`, kept from the non-manifold check of
+        `clean_mesh` so
         that the Laplacian need not sort the half-edges again; None when not known.
     route : str
         Which route of `cfsig.repair.stage.repair_mesh` the mesh took: ``"clean"`` (one closed
         manifold, as read), ``"repaired"``, ``"proxy"`` or ``"unrepaired"``.
     parts : (n,) int or None
-        Connected component of each vertex, numbered as `cfsig.files.elements.components` numbers them,
+        Connected component of each vertex, numbered as `cfsig.files.elements.components` numbers
+        them,
         kept from the repair stage's check so that the solve need not find them again; None
         when not known.
     """
@@ -58,12 +68,14 @@ class Mesh:
 def read_mesh(path: str | os.PathLike) -> Mesh:
     """Read a mesh file and check and repair it with `clean_mesh`.
 
-    OFF is parsed here; OBJ, PLY and STL through trimesh. Polygons are split into triangle fans.
+    OFF is parsed here, the others through trimesh. Polygons are split into triangle fans. A
+    scene (glTF, GLB, 3MF) is read as one mesh in world coordinates: every node's geometry
+    with its transform applied.
 
     Parameters
     ----------
     path : str or path-like
-        A ``.off``, ``.obj``, ``.ply`` or ``.stl`` file.
+        A file of one of the `cfsig.files.folders.MESH_SUFFIXES`.
 
     Returns
     -------
@@ -84,7 +96,7 @@ def read_bytes(path: str | os.PathLike) -> bytes:
     Parameters
     ----------
     path : str or path-like
-        A ``.off``, ``.obj``, ``.ply`` or ``.stl`` file.
+        A file of one of the `cfsig.files.folders.MESH_SUFFIXES`.
 
     Returns
     -------
@@ -128,7 +140,7 @@ def parse_mesh(data: bytes, path: str | os.PathLike) -> Mesh:
     if not data.strip():
         raise MeshError(f"{path}: empty file")
     try:
-        vertices, faces = _parse_off(data) if suffix == ".off" else _parse_trimesh(data, suffix)
+        vertices, faces = _parse_off(data) if suffix == ".off" else _parse_trimesh(data, path)
     except MeshError as exc:
         raise MeshError(f"{path}: {exc}") from None
     try:
@@ -464,15 +476,60 @@ def _as_indices(values: np.ndarray) -> np.ndarray:
     return indices
 
 
-def _parse_trimesh(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray]:
-    """Parse OBJ, PLY or STL bytes with trimesh, without its own processing."""
+def weld_close(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Merge the vertices that coincide up to the rounding of a scene's float32 coordinates.
+
+    A scene stores each part in its own frame, in float32, and places it by its node's
+    transform: the two sides of a seam between parts then meet only to within that rounding.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        Positions in world coordinates.
+    faces : (m, 3) int
+        Triangles.
+
+    Returns
+    -------
+    vertices : (k, 3) float64
+        One of each group of vertices closer than `WELD_TOLERANCE` times the bounding box's
+        diagonal, chained: the first of the group.
+    faces : (m, 3) int64
+        The triangles on them.
+    """
+    tolerance = WELD_TOLERANCE * float(np.linalg.norm(np.ptp(vertices, axis=0)))
+    pairs = cKDTree(vertices).query_pairs(tolerance, output_type="ndarray")
+    if not len(pairs):
+        return vertices, faces
+    n = len(vertices)
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    first = np.full(labels.max() + 1, n)
+    np.minimum.at(first, labels, np.arange(n))
+    return vertices[first], labels[faces].astype(np.int64)
+
+
+def _parse_trimesh(data: bytes, path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Parse the formats other than OFF with trimesh, without its own processing; a scene's
+    nodes are concatenated in world coordinates (``force="mesh"``), a glTF file's buffers found
+    beside it."""
+    suffix = Path(path).suffix.lower()
     try:
         import trimesh
+        import trimesh.resolvers
     except ImportError:
-        raise MissingDependencyError("reading OBJ, PLY and STL needs trimesh") from None
+        raise MissingDependencyError("reading this format needs trimesh") from None
+    if suffix == ".3mf" and importlib.util.find_spec("networkx") is None:
+        raise MissingDependencyError("reading 3MF needs networkx: pip install networkx")
+    resolver = trimesh.resolvers.FilePathResolver(str(path)) if suffix == ".gltf" else None
     try:
-        loaded = trimesh.load(io.BytesIO(data), file_type=suffix[1:], process=False, force="mesh")
+        loaded = trimesh.load(
+            io.BytesIO(data), file_type=suffix[1:], process=False, force="mesh", resolver=resolver
+        )
         assert isinstance(loaded, trimesh.Trimesh)  # force="mesh" makes one
-        return np.asarray(loaded.vertices), np.asarray(loaded.faces)
+        vertices, faces = np.asarray(loaded.vertices, np.float64), np.asarray(loaded.faces)
+        if suffix in SCENE_SUFFIXES and len(vertices):
+            return weld_close(vertices, faces)
+        return vertices, faces
     except Exception as exc:  # trimesh raises many types on malformed files
         raise MeshError(f"malformed {suffix[1:].upper()}: {exc}") from None

@@ -4,7 +4,8 @@ A segment holds the rows of one commit (or of several merged by compaction), wit
 of the format-1 index file, the sorted 64-bit keys of its names (so that a writer finds a name
 without reading the names), the rows of older segments it supersedes, the sketch of each row
 (`cfsig.index.sketch`, the lower bounds a search prunes by), the curvature channel's columns of the
-signatures stored again on their own (so that a partial query, `cfsig.search.partial`, reads only them),
+signatures stored again on their own (so that a partial query, `cfsig.search.partial`, reads only
+them),
 and a CRC-32 per chunk of signatures and per column. Layout: docs/index-format.md.
 """
 
@@ -20,6 +21,7 @@ import numpy as np
 
 from cfsig.errors import IndexFileError
 from cfsig.index.sketch import sketch_center, sketch_groups, sketch_rows
+from cfsig.params import Layout
 
 SEGMENT_FORMAT = "cfsig-segment"
 STRING = h5py.string_dtype("utf-8")
@@ -33,8 +35,9 @@ META = {
 }
 TEXT = ("names", "labels", "paths")
 COLUMNS = (*TEXT, "sha256", *META)  # the columns of a row besides its signature
-# The fine curvature cells of a row (`cfsig.descriptors.cells.packed_cells`), (rows, slots) each, in the
-# segments of a descriptor that keeps them (`cfsig.params.cell_slots`).
+# The fine curvature cells of a row (`cfsig.descriptors.cells.packed_cells`), (rows, slots) each,
+# in the
+# segments of an index whose layout keeps them (`cfsig.params.Layout.cells`).
 CELLS = {"cells": np.uint16, "cell_fractions": np.float32}
 _DTYPES = {**{k: STRING for k in TEXT}, "sha256": "S64", **META}
 _CHUNK_ROWS = 4096  # rows per chunk of signatures, each with its CRC-32
@@ -42,7 +45,7 @@ _PIECE_CHUNKS = 16  # chunks copied at a time by a merge: bounds its memory
 _SKETCH_CHUNK_ROWS = 65536  # rows per chunk of sketches (8.9 MB at 34 float32): few reads a scan
 _EXTRA = ("key_sorted", "key_rows", "drops", "signature_crc32")
 SKETCH_EXTRA = ("sketch_groups", "sketch_center", "sketch_error")  # with the dataset `sketch`
-CURVATURE_EXTRA = ("curvature_columns",)  # with the dataset `curvature`
+GROUP_COLUMNS = "{}_columns"  # where a column group's copy (the dataset of its name) lies
 # "signatures" (m, length) float32, every column (m,), and the CELLS (m, slots) if kept
 Piece = dict[str, np.ndarray]
 
@@ -106,12 +109,10 @@ def chunk_crcs(signatures: np.ndarray, chunk_rows: int) -> np.ndarray:
 def write_segment(
     path: Path,
     segment_id: int,
-    width: int,
+    layout: Layout,
     rows: int,
     pieces: Iterable[Piece],
     drops: np.ndarray,
-    curvature: slice | None = None,
-    cells: int | None = None,
 ) -> None:
     """Write a segment file from pieces of rows, with the keys of its names, sketches, checksums.
 
@@ -124,8 +125,10 @@ def write_segment(
         The new file.
     segment_id : int
         Its number in the index.
-    width : int
-        Signature length.
+    layout : Layout
+        The signature length, the column groups stored again on their own (each as the dataset
+        of its name, (rows, its columns) float32, in chunks of the signatures' rows), and the
+        fine cells per row (the pieces then hold `CELLS`, stored as (rows, cells) datasets).
     rows : int
         Number of rows the pieces hold in all.
     pieces : iterable of dict
@@ -133,12 +136,6 @@ def write_segment(
         `COLUMNS` (m,).
     drops : (d, 2) int64
         (segment, row) of the rows of older segments that rows of this one replace.
-    curvature : slice, optional
-        The curvature channel's columns (`cfsig.params.curvature_slice`): stored again as the
-        dataset ``curvature``, (rows, their number) float32, in chunks of the signatures' rows.
-    cells : int, optional
-        Fine curvature cells per row (`cfsig.params.cell_slots`): the pieces hold `CELLS`,
-        stored as (rows, cells) datasets in chunks of the signatures' rows.
 
     Raises
     ------
@@ -146,6 +143,7 @@ def write_segment(
         The pieces do not hold ``rows`` rows.
     """
     chunk = max(1, min(_CHUNK_ROWS, rows))
+    width, cells = layout.length, layout.cells
     groups = sketch_groups(width)
     center, error = np.zeros(len(groups)), 0.0
     with h5py.File(path, "w", libver="latest") as f:
@@ -156,21 +154,21 @@ def write_segment(
         sketch_chunk = (min(_SKETCH_CHUNK_ROWS, rows), len(groups)) if rows else None
         sketches = f.create_dataset("sketch", (rows, len(groups)), np.float32, chunks=sketch_chunk)
         columns = {k: f.create_dataset(k, (rows,), _DTYPES[k]) for k in COLUMNS}
-        if cells is not None:
+        if cells:
             for key, dtype in CELLS.items():
                 columns[key] = f.create_dataset(
                     key, (rows, cells), dtype, chunks=(chunk, cells) if rows else None
                 )
-        crcs = dict.fromkeys((*columns, "sketch"), 0)
-        if curvature is not None:
-            first, last, _ = curvature.indices(width)
-            copy = f.create_dataset(
-                "curvature",
+        copies = {
+            name: f.create_dataset(
+                name,
                 (rows, last - first),
                 np.float32,
                 chunks=(chunk, last - first) if rows else None,
             )
-            crcs["curvature"] = 0
+            for name, first, last in layout.groups
+        }
+        crcs = dict.fromkeys((*columns, "sketch", *copies), 0)
         sig_crcs, keys, start = [], [], 0
         for piece in _regroup(pieces, chunk * _PIECE_CHUNKS):
             rows32 = np.asarray(piece["signatures"], np.float32)  # the sketch of what is stored
@@ -183,10 +181,10 @@ def write_segment(
             sketches[start:stop] = sketch
             crcs["sketch"] = column_crc(sketch, crcs["sketch"])
             error = max(error, piece_error)
-            if curvature is not None:
-                values32 = rows32[:, curvature]
-                copy[start:stop] = values32
-                crcs["curvature"] = column_crc(values32, crcs["curvature"])
+            for name, first, last in layout.groups:
+                values32 = rows32[:, first:last]
+                copies[name][start:stop] = values32
+                crcs[name] = column_crc(values32, crcs[name])
             for key in columns:
                 values = np.asarray(piece[key], dtype=columns[key].dtype)
                 columns[key][start:stop] = values
@@ -206,8 +204,8 @@ def write_segment(
             "sketch_center": center,
             "sketch_error": np.array([error]),
         }
-        if curvature is not None:
-            extra["curvature_columns"] = np.array([first, last], np.int64)
+        for name, first, last in layout.groups:
+            extra[GROUP_COLUMNS.format(name)] = np.array([first, last], np.int64)
         for key, values in extra.items():
             f.create_dataset(key, data=values)
         f.attrs.update({f"crc32_{k}": np.uint32(v) for k, v in crcs.items()})
@@ -222,7 +220,7 @@ def scan_segment(
     Parameters
     ----------
     f : h5py.File
-        Open segment, or a format-1 index file (which has no checksums to check).
+        Open segment.
     dead : (d,) int64
         Sorted rows of this segment that later ones supersede: left out.
     problems : list of str, optional
@@ -232,8 +230,8 @@ def scan_segment(
     Yields
     ------
     piece : dict
-        As `write_segment` takes it, strings as ``str``. A segment's sketches and curvature
-        copy are checked, not yielded (a segment written before they existed has none).
+        As `write_segment` takes it, strings as ``str``. A segment's sketches and column group
+        copies are checked, not yielded.
 
     Raises
     ------
@@ -242,11 +240,12 @@ def scan_segment(
         piece).
     """
     sigs = f["signatures"]
-    n, verify = sigs.shape[0], "signature_crc32" in f
+    n = sigs.shape[0]
     chunk = sigs.chunks[0] if sigs.chunks else _CHUNK_ROWS
     step = chunk * _PIECE_CHUNKS
-    want = f["signature_crc32"][:] if verify else None
-    derived = [k for k in ("sketch", "curvature") if k in f]
+    want = f["signature_crc32"][:]
+    copies = [k for k in f if GROUP_COLUMNS.format(k) in f]
+    derived = [k for k in ("sketch", *copies) if k in f]
     stored = (*COLUMNS, *(k for k in CELLS if k in f))
     crcs = dict.fromkeys((*stored, *derived), 0)
     for start in range(0, n, step):
@@ -259,17 +258,14 @@ def scan_segment(
             crcs[key] = column_crc(piece[key], crcs[key])
             if piece[key].dtype.kind == "O":  # a damaged one is reported by its checksum below
                 piece[key] = np.array([v.decode(errors="replace") for v in piece[key]], object)
-        if want is not None:
-            got = chunk_crcs(piece["signatures"], chunk)
-            for i in np.flatnonzero(got != want[start // chunk : start // chunk + len(got)]):
-                first = start + int(i) * chunk
-                last = min(first + chunk, n) - 1
-                _damage(problems, f, f"signatures rows {first}-{last}")
+        got = chunk_crcs(piece["signatures"], chunk)
+        for i in np.flatnonzero(got != want[start // chunk : start // chunk + len(got)]):
+            first = start + int(i) * chunk
+            last = min(first + chunk, n) - 1
+            _damage(problems, f, f"signatures rows {first}-{last}")
         keep = np.setdiff1d(np.arange(start, stop), dead, assume_unique=True) - start
         yield {key: values[keep] for key, values in piece.items()}
-    if not verify:
-        return
-    extras = {"sketch": SKETCH_EXTRA, "curvature": CURVATURE_EXTRA}
+    extras = {"sketch": SKETCH_EXTRA, **{k: (GROUP_COLUMNS.format(k),) for k in copies}}
     for key in (*_EXTRA, *(e for k in derived for e in extras[k])):
         crcs[key] = column_crc(f[key][:])
     for key, crc in crcs.items():

@@ -1,7 +1,8 @@
 """The index: a folder of immutable segment files behind a small manifest replaced atomically.
 
-Layout (format version 2, docs/index-format.md): ``INDEX/manifest.h5`` holds the header
-(``format`` "cfsig-index", ``format_version``, ``params`` as JSON, ``cfsig_version``) and the
+Layout (format version 3, docs/index-format.md): ``INDEX/manifest.h5`` holds the header
+(``format`` "cfsig-index", ``format_version``, ``params`` and ``layout`` as JSON,
+``cfsig_version``) and the
 list of segments with their row counts and file checksums; each ``INDEX/seg-NNNNNNNN.h5``
 (`cfsig.index.segments`) holds the rows of one commit, or of several merged by compaction. A commit
 writes one new segment, syncs it to disk and renames a new manifest over the old one: it costs
@@ -11,8 +12,8 @@ which readers skip until compaction drops it. Segments pile up and are merged ei
 
 A process killed at any moment leaves the manifest of the previous or of the new commit; files
 it left that no manifest names are removed by the next writer. One writer at a time holds an
-exclusive lock on ``INDEX.lock`` beside the folder. Format-1 indexes (one HDF5 file) are read as
-one segment; `convert_index` writes them in this layout.
+exclusive lock on ``INDEX/lock``. An index of an older format is refused with the command that
+rebuilds it.
 
 cfsig runs on POSIX systems (Linux, macOS): the lock is ``flock`` and queries read with
 ``preadv``. ``fcntl`` is imported by the writer only, so that this module imports anywhere.
@@ -24,12 +25,11 @@ import hashlib
 import json
 import math
 import os
-import shutil
 import zlib
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import IO, TYPE_CHECKING
+from typing import IO, NoReturn, Protocol
 
 import h5py
 import numpy as np
@@ -39,7 +39,7 @@ from cfsig.errors import IndexFileError
 from cfsig.index.segments import (
     CELLS,
     COLUMNS,
-    CURVATURE_EXTRA,
+    GROUP_COLUMNS,
     META,
     SEGMENT_FORMAT,
     SKETCH_EXTRA,
@@ -51,14 +51,13 @@ from cfsig.index.segments import (
     write_segment,
 )
 from cfsig.index.sketch import Sketch
-from cfsig.params import Params, cell_slots, curvature_slice, signature_length
-
-if TYPE_CHECKING:  # importing the signature code would load scipy on the query path
-    from cfsig.descriptors.signature import Signature
+from cfsig.params import Layout, Params
 
 FORMAT = "cfsig-index"
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 MANIFEST = "manifest.h5"
+LOCK = "lock"
+REBUILD = "rebuild it: cfsig index FOLDER -o NEW_INDEX"
 MERGE_FANOUT = 8  # segments of one size class merged into one: each row is copied log8(N) times
 _OPEN_ATTEMPTS = 5  # a reader retries when a compaction removed a segment it was about to open
 _CRC_BLOCK = 1 << 24
@@ -81,6 +80,27 @@ class Entry:
     name: str
     label: str
     path: str
+
+
+class Signature(Protocol):
+    """What the index stores of a mesh's signature (`cfsig.descriptors.signature.Signature`)."""
+
+    @property
+    def vector(self) -> np.ndarray: ...  # (layout.length,) float
+    @property
+    def cells(self) -> tuple[np.ndarray, np.ndarray] | None: ...  # (layout.cells,) each
+    @property
+    def sha256(self) -> str: ...
+    @property
+    def n_vertices(self) -> int: ...
+    @property
+    def n_faces(self) -> int: ...
+    @property
+    def n_components(self) -> int: ...
+    @property
+    def phi_range(self) -> tuple[float, float]: ...
+    @property
+    def curvature_error(self) -> float: ...
 
 
 @dataclass(frozen=True)
@@ -118,6 +138,8 @@ class Manifest:
     ----------
     params : Params
         Parameters of every signature in it.
+    layout : Layout
+        What it keeps per row.
     segments : tuple of SegmentInfo
         Oldest first; rows are numbered segment after segment.
     next_id : int
@@ -125,6 +147,7 @@ class Manifest:
     """
 
     params: Params
+    layout: Layout
     segments: tuple[SegmentInfo, ...]
     next_id: int
 
@@ -142,23 +165,21 @@ class SegmentView:
     dead : (d,) int64
         Sorted rows of this segment superseded by later ones.
     sketch : Sketch or None
-        Its rows' sketches, the lower bounds a search prunes by; None for a segment written
-        before sketches existed, or a format-1 file, which a search scans in full.
-    curvature : ColumnCopy or None
-        The curvature channel's columns stored on their own, which a search of those columns
-        reads instead of the signatures; None for a descriptor without that channel, a segment
-        written before the copy existed, or a format-1 file.
+        Its rows' sketches, the lower bounds a search prunes by; None: scanned in full.
+    copies : tuple of ColumnCopy
+        The layout's column groups stored on their own, which a search of those columns reads
+        instead of the signatures.
     cells : (h5py.Dataset, h5py.Dataset) or None
         The fine curvature cells of its rows, (rows, slots) uint16, and their fractions,
-        (rows, slots) float32 (`cfsig.descriptors.cells.packed_cells`); None for a descriptor that keeps
-        none.
+        (rows, slots) float32 (`cfsig.descriptors.cells.packed_cells`); None for a layout that
+        keeps none.
     """
 
     signatures: h5py.Dataset
     start: int
     dead: np.ndarray
     sketch: Sketch | None = None
-    curvature: ColumnCopy | None = None
+    copies: tuple[ColumnCopy, ...] = ()
     cells: tuple[h5py.Dataset, h5py.Dataset] | None = None
 
 
@@ -179,7 +200,7 @@ class ColumnCopy:
 
 
 class IndexReader:
-    """Read access to an index (a folder, or a format-1 file); use as a context manager.
+    """Read access to an index folder; use as a context manager.
 
     Rows are numbered from 0 over the rows that are not superseded, segment after segment.
 
@@ -191,14 +212,14 @@ class IndexReader:
     Raises
     ------
     IndexFileError
-        Missing, not HDF5, corrupt, not a cfsig index, or of a newer format version.
+        Missing, not HDF5, corrupt, not a cfsig index, or of another format version.
     """
 
     def __init__(self, path: str | os.PathLike) -> None:
         self.path = Path(path)
         self._files: list[h5py.File] = []
         try:
-            self.params, self.segments = self._open()
+            manifest, self.segments = self._open()
         except BaseException:
             self.close()
             raise
@@ -210,17 +231,11 @@ class IndexReader:
         self._live_starts = np.cumsum(
             [0] + [r - len(s.dead) for r, s in zip(rows, self.segments, strict=True)]
         )
+        self.params, self.layout = manifest.params, manifest.layout
         self.signatures = Signatures(self)
 
-    def _open(self) -> tuple[Params, list[SegmentView]]:
-        """Open the manifest and its segments, or the format-1 file."""
-        if self.path.is_file():
-            f = _open_h5(self.path)
-            self._files.append(f)
-            params, version = _check_header(f, self.path)
-            if version >= 2:
-                raise IndexFileError(f"{self.path}: the manifest of an index: name its folder")
-            return params, [SegmentView(f["signatures"], 0, np.zeros(0, np.int64))]
+    def _open(self) -> tuple[Manifest, list[SegmentView]]:
+        """Open the manifest and its segments."""
         for attempt in range(_OPEN_ATTEMPTS):
             manifest = read_manifest(self.path)
             try:
@@ -237,12 +252,12 @@ class IndexReader:
             views, start = [], 0
             for info, f in zip(manifest.segments, files, strict=True):
                 where = self.path / info.file
-                sketch, copy = _read_sketch(f, where), _read_curvature(f, where)
-                cells = _read_cells(f, where, cell_slots(manifest.params))
-                view = SegmentView(f["signatures"], start, dead[info.id], sketch, copy, cells)
+                sketch, copies = _read_sketch(f, where), _read_copies(f, where, manifest.layout)
+                cells = _read_cells(f, where, manifest.layout.cells)
+                view = SegmentView(f["signatures"], start, dead[info.id], sketch, copies, cells)
                 views.append(view)
                 start += info.rows
-            return manifest.params, views
+            return manifest, views
         raise AssertionError("unreachable")  # pragma: no cover
 
     def __enter__(self) -> IndexReader:
@@ -349,10 +364,10 @@ class IndexReader:
         Returns
         -------
         cells : ((N, slots) uint16, (N, slots) float32) or None
-            `cfsig.descriptors.cells.packed_cells` of each row; None when the index's descriptor keeps none.
+            `cfsig.descriptors.cells.packed_cells` of each row; None when the index keeps none.
         """
-        slots = cell_slots(self.params)
-        if slots is None:
+        slots = self.layout.cells
+        if not slots:
             return None
         stored = [(view.cells, view.dead) for view in self.segments if view.cells is not None]
         cells, fractions = (
@@ -375,7 +390,7 @@ class Signatures:
 
     def __init__(self, reader: IndexReader) -> None:
         self._reader = reader
-        self.shape = (len(reader), signature_length(reader.params))
+        self.shape = (len(reader), reader.layout.length)
         self.dtype = np.dtype(np.float32)
 
     def __len__(self) -> int:
@@ -408,6 +423,9 @@ class IndexWriter:
     params : Params
         Parameters of the signatures to add; an existing index must have been built with equal
         parameters.
+    layout : Layout, optional
+        What the index keeps per row, as the descriptor declares it
+        (`cfsig.descriptors.layout`); needed to create an index, else the index's own.
     merge : bool
         Merge segments automatically after commits (`MERGE_FANOUT`).
 
@@ -415,31 +433,39 @@ class IndexWriter:
     ------
     IndexFileError
         Another process is writing the index, or the existing index is corrupt, foreign, of
-        another or a newer format, or built with other parameters.
+        another format, or built with other parameters or layout.
+    ValueError
+        A new index and no ``layout``.
     """
 
-    def __init__(self, path: str | os.PathLike, params: Params, merge: bool = True) -> None:
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        params: Params,
+        layout: Layout | None = None,
+        merge: bool = True,
+    ) -> None:
         self.path = Path(path)
         self.params = params
         self.merge = merge
         self._lock = _acquire_lock(self.path)
         try:
-            self._manifest = Manifest(params, (), 1)
-            if self.path.is_file():
-                with IndexReader(self.path):  # refuses foreign and newer files first
-                    pass
-                raise IndexFileError(
-                    f"{self.path}: an index of format 1: convert it with "
-                    f"`cfsig convert {self.path} NEW` to add to it"
-                )
-            if self.path.exists():
+            if (self.path / MANIFEST).exists():
                 self._manifest = read_manifest(self.path)
                 if self._manifest.params != params:
                     raise IndexFileError(
                         f"{self.path}: built with other parameters "
                         f"({self._manifest.params.to_json()})"
                     )
+                if layout is not None and layout != self._manifest.layout:
+                    raise IndexFileError(f"{self.path}: built with another layout")
                 self._remove_orphans()
+            elif layout is None:
+                raise ValueError(f"{self.path}: a new index needs its descriptor's layout")
+            else:  # a new index, empty, readable at once
+                self._manifest = Manifest(params, layout, (), 1)
+                self._remove_orphans()  # of a writer killed before its first manifest
+                write_manifest(self.path, self._manifest)
         except BaseException:
             self._lock.close()
             raise
@@ -465,6 +491,11 @@ class IndexWriter:
             f.close()
         self._files.clear()
         self._lock.close()
+
+    @property
+    def layout(self) -> Layout:
+        """What the index keeps per row."""
+        return self._manifest.layout
 
     @property
     def segments(self) -> tuple[SegmentInfo, ...]:
@@ -507,12 +538,14 @@ class IndexWriter:
         Raises
         ------
         ValueError
-            The parameters keep fine cells (`cfsig.params.cell_slots`) and the signature has
-            none, or of another width.
+            The layout keeps fine cells and the signature has none, or of another width; or
+            its vector is not of the layout's length.
         """
-        slots = cell_slots(self.params)
-        if slots is not None and (signature.cells is None or len(signature.cells[0]) != slots):
-            raise ValueError(f"{entry.name}: no fine cells, which these parameters keep")
+        slots = self.layout.cells
+        if slots and (signature.cells is None or len(signature.cells[0]) != slots):
+            raise ValueError(f"{entry.name}: no fine cells, which this index keeps")
+        if len(signature.vector) != self.layout.length:
+            raise ValueError(f"{entry.name}: a vector of {len(signature.vector)} entries")
         self._pending.append((entry, signature))
 
     @property
@@ -525,16 +558,12 @@ class IndexWriter:
 
         Then merges segments if enough of one size class have piled up (see `merge`).
         """
-        if not self._pending and self.path.exists():
-            return
         latest = {entry.name: (entry, sig) for entry, sig in self._pending}
-        if not self.path.exists():
-            self._create()
         if not latest:
             return
         found = self._find(list(latest))
         drops = np.array([loc for loc in found if loc is not None], np.int64).reshape(-1, 2)
-        piece = _piece(list(latest.values()), self.params)
+        piece = _piece(list(latest.values()), self.layout)
         self._write([piece], len(latest), drops, len(self.segments))
         self._pending.clear()
         if self.merge:
@@ -577,15 +606,13 @@ class IndexWriter:
         info = SegmentInfo(old.next_id, rows, rows, 0)
         path = self.path / info.file
         try:
-            width, curvature = signature_length(self.params), curvature_slice(self.params)
-            slots = cell_slots(self.params)
-            write_segment(path, info.id, width, rows, pieces, drops, curvature, slots)
+            write_segment(path, info.id, old.layout, rows, pieces, drops)
             _fsync(path)
             info = replace(info, crc32=file_crc(path))
             ids, dropped = np.unique(drops[:, 0] if new else [], return_counts=True)
             counts = {int(s): int(n) for s, n in zip(ids, dropped, strict=True)}
             older = [replace(s, live=s.live - counts.get(s.id, 0)) for s in old.segments[:start]]
-            manifest = Manifest(self.params, (*older, info), info.id + 1)
+            manifest = Manifest(self.params, old.layout, (*older, info), info.id + 1)
             write_manifest(self.path, manifest)
         except BaseException:
             path.unlink(missing_ok=True)
@@ -601,15 +628,6 @@ class IndexWriter:
             for seg, row in drops if new else ():
                 self._keys[int(seg)].dead.add(int(row))
             self._keys[info.id] = _Keys.read(self._file(info.id))
-
-    def _create(self) -> None:
-        """Create the folder with an empty manifest, atomically: made aside, then renamed."""
-        tmp = self.path.with_name(f".{self.path.name}.new")
-        shutil.rmtree(tmp, ignore_errors=True)  # left by a writer killed here
-        tmp.mkdir()
-        write_manifest(tmp, self._manifest)
-        os.rename(tmp, self.path)
-        _fsync(self.path.parent)
 
     def _find(self, names: list[str]) -> list[tuple[int, int] | None]:
         """The committed (segment, row) of each name, or None for a new name."""
@@ -682,18 +700,21 @@ def read_manifest(path: Path) -> Manifest:
         No manifest, not HDF5, not a cfsig index, newer, or its checksum does not match.
     """
     file = path / MANIFEST
+    if path.is_file():
+        _not_a_folder(path)
     if not path.is_dir():
         raise IndexFileError(f"{path}: no such index")
     if not file.is_file():
         raise IndexFileError(f"{path}: not a cfsig index (no {MANIFEST})")
     with _open_h5(file, path) as f:
-        params, _ = _check_header(f, path)
+        params, layout = _check_header(f, path)
         try:
             columns = [
                 f[k][:] for k in ("segment_ids", "segment_rows", "segment_live", "segment_crc32")
             ]
             manifest = Manifest(
                 params,
+                layout,
                 tuple(SegmentInfo(*map(int, row)) for row in zip(*columns, strict=True)),
                 int(f.attrs["next_segment"]),
             )
@@ -703,6 +724,29 @@ def read_manifest(path: Path) -> Manifest:
     if crc != _manifest_crc(manifest):
         raise IndexFileError(f"{path}: the manifest is damaged (checksum mismatch)")
     return manifest
+
+
+def existing_params(path: str | os.PathLike) -> Params | None:
+    """The parameters of the index at ``path``, or None when none has been committed there.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A folder, an index or not.
+
+    Returns
+    -------
+    params : Params or None
+
+    Raises
+    ------
+    IndexFileError
+        As `read_manifest`, for an index there that this cfsig does not read.
+    """
+    path = Path(path)
+    if path.is_dir() and not (path / MANIFEST).exists():
+        return None
+    return read_manifest(path).params if path.exists() else None
 
 
 def write_manifest(path: Path, manifest: Manifest) -> None:
@@ -722,6 +766,7 @@ def write_manifest(path: Path, manifest: Manifest) -> None:
             format=FORMAT,
             format_version=FORMAT_VERSION,
             params=manifest.params.to_json(),
+            layout=manifest.layout.to_json(),
             cfsig_version=__version__,
             next_segment=manifest.next_id,
             crc32=np.uint32(_manifest_crc(manifest)),
@@ -744,6 +789,7 @@ def _manifest_crc(manifest: Manifest) -> int:
     text = json.dumps(
         [
             manifest.params.to_json(),
+            manifest.layout.to_json(),
             manifest.next_id,
             [list(vars(s).values()) for s in manifest.segments],
         ]
@@ -788,14 +834,14 @@ def _dead_rows(
     return dead
 
 
-def _piece(records: list[tuple[Entry, Signature]], params: Params) -> Piece:
-    """The rows of some records made with ``params``, as `write_segment` takes them."""
+def _piece(records: list[tuple[Entry, Signature]], layout: Layout) -> Piece:
+    """The rows of some records, as `write_segment` takes them for ``layout``."""
     sigs = [s for _, s in records]
-    width, slots = signature_length(params), cell_slots(params)
+    width, slots = layout.length, layout.cells
     phi = np.array([s.phi_range for s in sigs], np.float64).reshape(-1, 2)
     held = [s.cells for s in sigs if s.cells is not None]  # all of them or none (`add`)
     cells = {}
-    if slots is not None:
+    if slots:
         for i, (key, dtype) in enumerate(CELLS.items()):
             cells[key] = np.array([c[i] for c in held], dtype).reshape(-1, slots)
     return {
@@ -830,14 +876,9 @@ def check_index(path: str | os.PathLike) -> list[str]:
     Raises
     ------
     IndexFileError
-        Not an index this cfsig reads, a damaged manifest, or a format-1 file (which has no
-        checksums).
+        Not an index this cfsig reads, or a damaged manifest.
     """
     path = Path(path)
-    if path.is_file():
-        with IndexReader(path):
-            pass
-        raise IndexFileError(f"{path}: a format-1 index has no checksums: convert it first")
     manifest = read_manifest(path)
     problems = []
     for info in manifest.segments:
@@ -892,38 +933,6 @@ def compact_index(path: str | os.PathLike) -> tuple[int, int]:
         before = len(writer.segments)
         writer.compact()
         return before, len(writer)
-
-
-def convert_index(source: str | os.PathLike, target: str | os.PathLike) -> int:
-    """Write the rows of an index (format 1 or 2) as a new index of this format, in one segment.
-
-    Parameters
-    ----------
-    source : str or path-like
-        The index to read; left unchanged.
-    target : str or path-like
-        The new index folder; must not exist.
-
-    Returns
-    -------
-    rows : int
-        Rows written.
-
-    Raises
-    ------
-    IndexFileError
-        ``source`` is unusable or damaged, or ``target`` exists.
-    """
-    target = Path(target)
-    if target.exists():
-        raise IndexFileError(f"{target}: already exists")
-    with IndexReader(source) as reader, IndexWriter(target, reader.params, merge=False) as writer:
-        writer.commit()  # creates the empty index
-        pieces = (
-            p for view in reader.segments for p in scan_segment(view.signatures.file, view.dead)
-        )
-        writer._write(pieces, len(reader), np.zeros((0, 2), np.int64), 0)
-        return len(reader)
 
 
 def file_crc(path: Path) -> int:
@@ -993,12 +1002,10 @@ def _read_sketch(f: h5py.File, path: Path) -> Sketch | None:
     return Sketch(f["sketch"], groups.astype(np.int64), center.astype(np.float64), float(error[0]))
 
 
-def _read_cells(
-    f: h5py.File, path: Path, slots: int | None
-) -> tuple[h5py.Dataset, h5py.Dataset] | None:
-    """A segment's fine curvature cells and fractions, for parameters that keep ``slots`` of
-    them a row (None: none); checks that they are there, in shapes that fit its signatures."""
-    if slots is None:
+def _read_cells(f: h5py.File, path: Path, slots: int) -> tuple[h5py.Dataset, h5py.Dataset] | None:
+    """A segment's fine curvature cells and fractions, for a layout that keeps ``slots`` of
+    them a row (0: none); checks that they are there, in shapes that fit its signatures."""
+    if not slots:
         return None
     shape = (f["signatures"].shape[0], slots)
     if any(key not in f or f[key].shape != shape for key in CELLS):
@@ -1006,19 +1013,21 @@ def _read_cells(
     return f["cells"], f["cell_fractions"]
 
 
-def _read_curvature(f: h5py.File, path: Path) -> ColumnCopy | None:
-    """A segment's copy of its curvature columns, or None if it has none; checks shapes."""
-    if "curvature" not in f:
-        return None
-    try:
-        columns = f[CURVATURE_EXTRA[0]][:]
-    except KeyError:
-        raise IndexFileError(f"{path}: its curvature copy is incomplete") from None
-    rows, width = f["signatures"].shape
-    first, last = (int(c) for c in columns) if columns.shape == (2,) else (0, 0)
-    if not 0 <= first < last <= width or f["curvature"].shape != (rows, last - first):
-        raise IndexFileError(f"{path}: its curvature copy does not match its signatures")
-    return ColumnCopy(f["curvature"], slice(first, last))
+def _read_copies(f: h5py.File, path: Path, layout: Layout) -> tuple[ColumnCopy, ...]:
+    """A segment's copies of the layout's column groups; checks that they are there and fit."""
+    copies = []
+    rows = f["signatures"].shape[0]
+    for name, first, last in layout.groups:
+        where = GROUP_COLUMNS.format(name)
+        if name not in f or where not in f:
+            raise IndexFileError(f"{path}: its copy of the columns {name!r} is incomplete")
+        columns = f[where][:]
+        if list(columns) != [first, last] or f[name].shape != (rows, last - first):
+            raise IndexFileError(
+                f"{path}: its copy of the columns {name!r} does not match its signatures"
+            )
+        copies.append(ColumnCopy(f[name], slice(first, last)))
+    return tuple(copies)
 
 
 def _open_h5(path: Path, index: Path | None = None) -> h5py.File:
@@ -1033,8 +1042,8 @@ def _open_h5(path: Path, index: Path | None = None) -> h5py.File:
         raise IndexFileError(f"{name}: not a readable HDF5 file{where} ({exc})") from None
 
 
-def _check_header(f: h5py.File, path: Path) -> tuple[Params, int]:
-    """Check the format attributes and return the stored parameters and the format version."""
+def _check_header(f: h5py.File, path: Path) -> tuple[Params, Layout]:
+    """Check the format attributes and return the stored parameters and layout."""
     if f.attrs.get("format") != FORMAT:
         raise IndexFileError(f"{path}: not a cfsig index")
     version = int(f.attrs.get("format_version", -1))
@@ -1042,12 +1051,32 @@ def _check_header(f: h5py.File, path: Path) -> tuple[Params, int]:
         raise IndexFileError(
             f"{path}: index format {version} is newer than this cfsig reads ({FORMAT_VERSION})"
         )
-    if version < 2 and "signatures" not in f:
-        raise IndexFileError(f"{path}: not a cfsig index")
+    if version < FORMAT_VERSION:
+        raise IndexFileError(f"{path}: {_made_by(f.attrs.get('params'))}; {REBUILD}")
     try:
-        return Params.from_json(f.attrs["params"]), version
+        return Params.from_json(f.attrs["params"]), Layout.from_json(f.attrs["layout"])
     except (KeyError, TypeError, ValueError) as exc:
         raise IndexFileError(f"{path}: unreadable parameters ({exc})") from None
+
+
+def _not_a_folder(path: Path) -> NoReturn:
+    """Refuse a file given as an index: an index of the older one-file format names its
+    rebuild, a manifest its folder."""
+    with _open_h5(path) as f:
+        _check_header(f, path)
+    raise IndexFileError(f"{path}: the manifest of an index: name its folder")
+
+
+def _made_by(params: object) -> str:
+    """What an index of an older format was made with, in words, from its stored parameters."""
+    try:
+        data = json.loads(str(params))
+        descriptor = str(data.get("descriptor", "cf"))
+        version = data.get("version")
+    except (ValueError, AttributeError):
+        return "made by an older cfsig"
+    named = descriptor if version is None else f"{descriptor} version {version}"
+    return f"made by an older cfsig, with the descriptor {named} that this one no longer computes"
 
 
 def _acquire_lock(path: Path) -> IO[str]:
@@ -1056,14 +1085,28 @@ def _acquire_lock(path: Path) -> IO[str]:
         import fcntl
     except ImportError:  # not POSIX: the module docstring says why
         raise IndexFileError(f"{path}: writing an index needs a POSIX system (flock)") from None
-    path.parent.mkdir(parents=True, exist_ok=True)
-    lock = open(path.with_name(path.name + ".lock"), "a+")  # noqa: SIM115
+    if path.is_file():
+        _not_a_folder(path)
+    if (path / MANIFEST).exists():
+        read_manifest(path)  # refuses an index of another format before writing into it
+    elif path.is_dir() and any(not _ours(p.name) for p in path.iterdir()):
+        raise IndexFileError(f"{path}: a folder that is not a cfsig index")
+    path.mkdir(parents=True, exist_ok=True)
+    lock = open(path / LOCK, "a+")  # noqa: SIM115
     try:
         fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
         lock.close()
         raise IndexFileError(f"{path}: another process is writing this index") from None
     return lock
+
+
+def _ours(name: str) -> bool:
+    """Whether a file in an index folder is one a writer makes: its lock, a segment, a
+    temporary file (left by a writer killed before its first manifest)."""
+    return (
+        name == LOCK or name.endswith(".tmp") or (name.startswith("seg-") and name.endswith(".h5"))
+    )
 
 
 def _fsync(path: Path) -> None:

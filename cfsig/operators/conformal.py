@@ -268,7 +268,8 @@ def laplacian_solver(
     to 0 and the remaining symmetric positive definite system ``-L' x' = -rhs'`` is factorised;
     ``rhs`` must sum to zero on every component, so that the pinned equation is implied by the
     others. Neither the right-hand side nor the solution is checked, and no mean is subtracted:
-    the Lanczos iteration of `cfsig.operators.spectrum.laplace_spectrum`, about 150 solves, projects the
+    the Lanczos iteration of `cfsig.operators.spectrum.laplace_spectrum`, about 150 solves,
+    projects the
     constants out itself and checks its eigenvalues once (`factorize_laplacian` checks).
 
     Parameters

@@ -187,9 +187,9 @@ def _scan(
 
 def _source(view: SegmentView, columns: slice | None) -> tuple[h5py.Dataset, slice | None]:
     """What a scan of some columns of a segment reads: its copy of them if it has one."""
-    copy = view.curvature
-    if columns is not None and copy is not None and copy.columns == columns:
-        return copy.rows, None
+    for copy in view.copies:
+        if copy.columns == columns:
+            return copy.rows, None
     return view.signatures, columns
 
 

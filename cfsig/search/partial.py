@@ -1,21 +1,21 @@
 """Partial queries: find the whole shapes that a part of a shape (a cut, a scan) comes from.
 
 The paper names partial matching as the natural extension (section 4). The global channels of
-``cfhks`` change when a shape is cut, but its curvature at small scales (`cfsig.operators.curvature`)
+the ``intrinsic`` descriptor change when a shape is cut, but its curvature at small scales
+(`cfsig.operators.curvature`)
 changes only near the cut: a part's histograms of it are close to those of the whole it was
 cut from, once both are measured at the same scale. That scale is relative to the whole's
 area, which a part does not know, so the part is measured for each share ``f`` of `SHARES`:
 diffusion times ``s * area / f`` and values divided by ``f``, as if its whole had the area
 ``area / f``. A whole's partial distance, over those shares, is the smallest sum of two terms
 (`partial_scores`): the share of the part's histograms that the whole's cannot hold (a part is
-a subset of its whole's surface), and their L1 distance. Version 10 keeps beside each
-whole's vector its fine curvature cells (`cfsig.descriptors.cells`): a part of such an index is measured at
-the 13 `FINE_SHARES` and compared by its cells instead, every row's read (docs/method.md,
-section 19).
+a subset of its whole's surface), and their L1 distance. An index built with
+`Params.partial_cells` keeps beside each whole's vector its fine curvature cells
+(`cfsig.descriptors.cells`): a part is then measured at the 13 `FINE_SHARES` and compared by
+its cells instead, every row's read (`cfsig.search.cells`).
 
 The nearest whole then stands for the part (query expansion): the others are ranked by their
 whole-shape distance to it, so a part finds the relatives of its whole as a whole would.
-Only ``cfhks`` version 3 and later store the curvature channel (docs/method.md).
 """
 
 from __future__ import annotations
@@ -23,21 +23,23 @@ from __future__ import annotations
 import mmap
 import os
 import threading
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
 
-from cfsig.descriptors.cells import cell_histogram, part_scorer
-from cfsig.descriptors.intrinsic import DESIGNS, Design, curvature_histograms, weigh_curvature
+from cfsig.descriptors import intrinsic
+from cfsig.descriptors.cells import cell_histogram
 from cfsig.errors import MeshError, PartialError, SolverError
 from cfsig.files.mesh import Mesh, read_mesh
 from cfsig.index.blocks import Block, map_file, mapped_block, plan_blocks, read_block
 from cfsig.index.store import IndexReader, SegmentView
 from cfsig.operators.conformal import Operators, operators
 from cfsig.operators.curvature import smoothed_curvature
-from cfsig.params import Params, curvature_slice
+from cfsig.params import Params
 from cfsig.repair.simplify import simplified_mesh
+from cfsig.search.cells import cell_scores
 from cfsig.search.nearest import Hit, l1_distances, nearest, parallel
 
 SHARES = tuple(2.0 ** (-j / 2) for j in range(7))  # a part's area over its whole's: 1 to 1/8
@@ -49,6 +51,11 @@ FINE_SHARES = tuple(2.0 ** (-j / 4) for j in range(13))
 # alone, the best mean NN of its three kinds of parts (docs/partial.md, "The partial distance's
 # weight").
 HISTOGRAM_WEIGHT = 1.0
+# Rows from which the compiled kernel (extra ``cfsig[fast]``) repays loading it in a process's
+# first query.
+FAST_MIN_ROWS = 500
+# A part's scores of blocks of wholes: ``scorer(cells, fractions)`` as `cell_scores`.
+Scorer = Callable[[np.ndarray, np.ndarray], np.ndarray]
 _CELL_BLOCK_ROWS = 4096  # rows of fine cells read at a time, as a segment stores them
 _SCORE_ROWS = 512  # rows of fine cells scored at a time: bounds NumPy's scratch memory
 # A thread's space for a block of fine cells: (rows, slots) uint16 cells, float32 fractions.
@@ -65,11 +72,12 @@ class Part:
     Attributes
     ----------
     vectors : (len(SHARES), columns) float64 or None
-        `partial_vectors`: the curvature channel at each share, for the versions without fine
-        cells; None for the others.
+        `partial_vectors`: the curvature channel at each share, for an index without fine
+        cells; None for one with them.
     cells : tuple of (cells, fractions), or None
-        For the versions that keep fine cells (`cfsig.params.cell_slots`), the part's
-        `cfsig.descriptors.cells.cell_histogram` of all its scales at each share of `FINE_SHARES`: cells
+        For an index with fine cells (`Params.partial_cells`), the part's
+        `cfsig.descriptors.cells.cell_histogram` of all its scales at each share of `FINE_SHARES`:
+        cells
         (c,) int64 ascending, fractions (c,) float64 summing to 1; None for the others.
     """
 
@@ -101,11 +109,10 @@ def measure_part(mesh: Mesh, params: Params) -> Part:
         A curvature diffusion failed.
     """
     curvature_columns(params)
-    assert params.version is not None  # checked by curvature_columns
-    fine = DESIGNS[params.version].fine
-    if fine is None:
+    if not params.partial_cells:
         return Part(vectors=partial_vectors(mesh, params))
     measured = share_curvatures(mesh, params, FINE_SHARES)
+    fine = (intrinsic.FINE_BINS, intrinsic.FINE_BAND)
     return Part(cells=tuple(cell_histogram(v, a, *fine) for v, a in measured))
 
 
@@ -120,20 +127,20 @@ def curvature_columns(params: Params) -> slice:
     Returns
     -------
     columns : slice
-        The last columns, of the size of the version's `cfsig.descriptors.intrinsic.curvature_shape`.
+        The curvature group of the intrinsic descriptor's layout.
 
     Raises
     ------
     PartialError
-        The descriptor has no curvature channel (``cf``, ``cfhks`` before version 3).
+        The descriptor is not ``intrinsic``, the only one with a curvature channel.
     """
-    columns = curvature_slice(params)
-    if columns is None:
+    if params.descriptor != "intrinsic":
         raise PartialError(
-            f"partial queries need the curvature channel of cfhks version 3 or later; this "
-            f"index holds {params.descriptor} version {params.version}: rebuild it with "
-            f"'cfsig index FOLDER -o NEW --descriptor cfhks'"
+            f"partial queries need the curvature channel of the intrinsic descriptor; this "
+            f"index holds {params.descriptor}: build one with 'cfsig index FOLDER -o NEW'"
         )
+    columns = intrinsic.intrinsic_layout(params).group("curvature")
+    assert columns is not None  # the intrinsic layout has it
     return columns
 
 
@@ -160,11 +167,9 @@ def partial_vectors(mesh: Mesh, params: Params) -> np.ndarray:
         A curvature diffusion failed.
     """
     curvatures = share_curvatures(mesh, params)
-    assert params.version is not None  # checked by share_curvatures
-    design = DESIGNS[params.version]
     return np.array(
         [
-            weigh_curvature(curvature_histograms(values, areas, design.bins, design.band), design)
+            intrinsic.weigh_curvature(intrinsic.curvature_histograms(values, areas))
             for values, areas in curvatures
         ]
     )
@@ -202,38 +207,27 @@ def share_curvatures(
         A curvature diffusion failed.
     """
     curvature_columns(params)
-    assert params.version is not None  # checked by curvature_columns
-    design = DESIGNS[params.version]
-    if not design.curvature_on_copy:
-        return _share_values(operators(mesh, params.mollify), design, shares)
-    # The wholes' curvature is measured on copies of `coarse` faces (`cfsig.descriptors.intrinsic`): a part
+    # The wholes' curvature is measured on copies of `coarse` faces
+    # (`cfsig.descriptors.intrinsic`): a part
     # that is a share f of its whole is simplified to f times as many. The part's own operators
     # serve the shares it has too few faces to simplify for, built once if any.
     curvatures, whole = [], None
     for share in shares:
-        copy = simplified_mesh(mesh, round(design.coarse * share))
+        copy = simplified_mesh(mesh, round(intrinsic.COARSE * share))
         if copy is not None:
             surface = operators(copy)
         else:
             if whole is None:
                 whole = operators(mesh, params.mollify)
             surface = whole
-        curvatures += _share_values(surface, design, (share,))
+        curvatures.append(_share_values(surface, share))
     return curvatures
 
 
-def _share_values(
-    ops: Operators, design: Design, shares: tuple[float, ...]
-) -> list[tuple[np.ndarray, np.ndarray]]:
-    """`share_curvatures` of a part's operators for some shares."""
-    fractions = np.asarray(shares)
-    scales = np.asarray(design.scales)[None, :] / fractions[:, None]  # (shares, scales)
-    # Quadrupling scales over shares a factor 2 apart in area meet: each distinct one once.
-    distinct, where = np.unique(scales, return_inverse=True)
-    values = smoothed_curvature(ops, tuple(distinct), design.tolerance, design.predict)
-    values = values[:, where.reshape(scales.shape)]
-    values /= fractions[:, None]
-    return [(values[:, i], ops.vertex_area) for i in range(len(shares))]
+def _share_values(ops: Operators, share: float) -> tuple[np.ndarray, np.ndarray]:
+    """`share_curvatures` of a part's operators for one share."""
+    scales = tuple(s / share for s in intrinsic.SCALES)
+    return smoothed_curvature(ops, scales) / share, ops.vertex_area
 
 
 def query_part(reader: IndexReader, part: Part, k: int = 20) -> tuple[list[Hit], float]:
@@ -242,7 +236,7 @@ def query_part(reader: IndexReader, part: Part, k: int = 20) -> tuple[list[Hit],
     Parameters
     ----------
     reader : IndexReader
-        An open index of ``cfhks`` version 3 or later.
+        An open index of the ``intrinsic`` descriptor.
     part : Part
         The part, measured with the index's parameters (`measure_part`).
     k : int
@@ -380,13 +374,15 @@ def partial_distances(
     params : Params
         Their parameters.
     cells : ((N, slots) uint16, (N, slots) float32), optional
-        The wholes' fine cells and fractions (`cfsig.descriptors.signature.Signature.cells`), needed when
+        The wholes' fine cells and fractions (`cfsig.descriptors.signature.Signature.cells`),
+        needed when
         ``params`` keep them.
 
     Returns
     -------
     distances : (N,) float64
-        `partial_scores` of the wholes, or by their fine cells `cfsig.descriptors.cells.part_scorer`.
+        `partial_scores` of the wholes, or by their fine cells
+        `cfsig.descriptors.cells.part_scorer`.
 
     Raises
     ------
@@ -481,3 +477,32 @@ def expanded_distances(
     distances = l1_distances(signatures[first : first + 1], signatures)[0]
     distances[first] = -1.0
     return distances
+
+
+def part_scorer(
+    part: Sequence[tuple[np.ndarray, np.ndarray]], shares: tuple[float, ...], rows: int
+) -> Scorer:
+    """`cfsig.search.cells.cell_scores` of one part, by the compiled kernel where it pays.
+
+    Parameters
+    ----------
+    part, shares
+        As `cfsig.search.cells.cell_scores`.
+    rows : int
+        Rows the search will score: from `FAST_MIN_ROWS`, numba's kernel if numba is installed
+        (`cfsig.search.cells_numba`), else NumPy's: the same scores.
+
+    Returns
+    -------
+    scorer : callable
+        ``scorer(cells, fractions)``: the wholes' (m, slots) cells and fractions to their (m,)
+        float64 scores.
+    """
+    if rows >= FAST_MIN_ROWS:
+        try:
+            from cfsig.search import cells_numba  # numba takes a second to import: only here
+        except ImportError:
+            pass
+        else:
+            return cells_numba.part_scorer(part, shares)
+    return partial(cell_scores, part, shares)

@@ -1,0 +1,81 @@
+"""What a user waits for at the shell: ``cfsig query INDEX PART.off --partial`` over many rows.
+
+    python benchmarks/partial_speed.py --index-dir DIR --rows 1000000 [--repeat 5]
+
+Builds ``DIR/rows-N``, an index of N rows with fine curvature cells
+(``Params(partial_cells=True)``), unless it is already there: the demo collection
+(`cfsig.files.demo.make_demo_collection`, one mesh a class: 6) is computed once and its
+signatures are added again and again under distinct names, a commit every 100,000 rows.
+
+Then times the whole command ``python -m cfsig query DIR/rows-N PART.off --partial`` in a fresh
+interpreter (its start, imports, the part's measurement and the search of every row included),
+PART a plane cut of one demo mesh (`results.cut`), ``--repeat`` times after one warm-up, and
+prints the median and the range in seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from results import cut
+
+import cfsig
+from cfsig.files.demo import make_demo_collection, write_off
+
+COMMIT_ROWS = 100_000
+
+
+def build(index: Path, rows: int, demo: list[Path]) -> float:
+    """Write ``rows`` copies of the demo signatures with fine cells; the seconds taken."""
+    start = time.perf_counter()
+    params = cfsig.Params(partial_cells=True)
+    signatures = [cfsig.signature_file(path, params) for path in demo]
+    with cfsig.IndexWriter(index, params, cfsig.layout(params)) as writer:
+        for i in range(rows):
+            label = f"class{i % len(signatures)}"
+            name = f"{label}/{i}.off"
+            writer.add(cfsig.Entry(name, label, f"/rows/{name}"), signatures[i % len(signatures)])
+            if writer.pending >= COMMIT_ROWS:
+                writer.commit()
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    """Build or reuse the index, make the part, time the command."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--index-dir", type=Path, required=True, help="folder of the index")
+    parser.add_argument("--rows", type=int, default=1_000_000, help="rows of the index")
+    parser.add_argument("--repeat", type=int, default=5, help="timed commands")
+    args = parser.parse_args()
+    index = args.index_dir / f"rows-{args.rows}"
+    demo = make_demo_collection(args.index_dir / "demo", per_class=1)
+    if (index / "manifest.h5").exists():
+        with cfsig.IndexReader(index) as reader:
+            print(f"reusing {index}: {len(reader):,} rows")
+    else:
+        print(f"built {index}: {args.rows:,} rows in {build(index, args.rows, demo):.1f} s")
+    part = cut(cfsig.read_mesh(demo[0]), np.random.default_rng(0))
+    path = args.index_dir / "part.off"
+    write_off(path, part.vertices, part.faces)
+    command = [sys.executable, "-m", "cfsig", "query", str(index), str(path), "--partial"]
+    times = []
+    for _ in range(args.repeat + 1):  # the first is a warm-up
+        start = time.perf_counter()
+        subprocess.run(command, check=True, capture_output=True)
+        times.append(time.perf_counter() - start)
+    times = times[1:]
+    print(
+        f"`cfsig query INDEX PART.off --partial`, {args.rows:,} rows with fine cells, "
+        f"{len(part.faces)} faces in the part: median {statistics.median(times):.3f} s "
+        f"over {args.repeat} (range {min(times):.3f} to {max(times):.3f} s)"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,86 @@
+"""Smoke tests of the scripts in benchmarks/: each runs on tiny generated data and prints its table.
+
+Each script runs as a subprocess, as a user runs it, from the project folder.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cfsig.files.demo import make_demo_collection
+
+ROOT = Path(__file__).resolve().parents[1]
+NUMBER = r"\d+\.\d+"
+
+
+def run(script: str, *args: object) -> str:
+    """Run ``benchmarks/<script>`` with ``args``; check it succeeds and return its output."""
+    command = [sys.executable, f"benchmarks/{script}", *map(str, args)]
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory) -> Path:
+    """DATA/shrec07/<class>/<file>.off: two classes of the demo collection, three meshes each."""
+    root = tmp_path_factory.mktemp("data")
+    make_demo_collection(root / "shrec07", per_class=3)
+    for folder in (root / "shrec07").iterdir():
+        if folder.name not in ("limbs1", "torus"):
+            shutil.rmtree(folder)
+    return root
+
+
+def test_results(data, tmp_path):
+    doc = tmp_path / "results.md"
+    marker = "<!-- measured: what follows is written by benchmarks/results.py -->"
+    doc.write_text(f"# Results\n\nKept.\n\n{marker}\nreplaced\n")
+    # --every 2: limbs1-0, limbs1-2 and torus-1
+    args = ["--data-root", data, "--collections", "shrec07", "--jobs", 1, "--every", 2]
+    out = run("results.py", *args, "--doc", doc)
+    assert "| collection | descriptor | queries | NN | FT | ST | DCG | mAP | s per mesh |" in out
+    # torus-1 alone in its class is not a query of the whole shapes, but its parts are
+    assert re.search(rf"\| shrec07 \| `cf` \| 2 \|( {NUMBER} \|){{6}}", out)
+    assert re.search(rf"\| shrec07 \| `intrinsic` \| 2 \|( {NUMBER} \|){{6}}", out)
+    assert "| collection | parts | ranked by | queries | NN | FT | mAP |" in out
+    for kind in ("cut", "holes", "scan"):
+        for ranked in ("curvature columns", "fine cells"):
+            assert re.search(rf"\| shrec07 \| {kind} \| {ranked} \| 3 \|( {NUMBER} \|){{3}}", out)
+    text = doc.read_text()
+    assert text.startswith(f"# Results\n\nKept.\n\n{marker}\n\nMeasured by `python benchmarks/")
+    assert "replaced" not in text and text.count("| shrec07 |") == 8
+
+
+def test_partial_speed(tmp_path):
+    out = run("partial_speed.py", "--index-dir", tmp_path, "--rows", 2000, "--repeat", 1)
+    assert "2,000 rows" in out
+    assert re.search(rf"--partial`, 2,000 rows .*: median {NUMBER} s over 1 \(range", out)
+
+
+def test_per_mesh(data):
+    out = run("per_mesh.py", "--data", data / "shrec07", "--every", 2)
+    assert "| descriptor | CPU s per mesh | wall s per mesh |" in out
+    assert re.search(rf"\| `cf` \| {NUMBER} \| {NUMBER} \|", out)
+    assert re.search(rf"\| `intrinsic` / `cf` \| {NUMBER} \| {NUMBER} \|", out)
+
+
+def test_messy(data, tmp_path):
+    doc = tmp_path / "messy.md"
+    args = ["--data", data / "shrec07", "--every", 2, "--kinds", "holes", "--check", 1]
+    out = run("messy.py", "run", *args, "--jobs", 1, "--doc", doc)
+    assert "| kind | copies | failed | rank 1 % |" in out
+    assert re.search(r"\| holes \| 3 \| 0 \| [\d.]+ \|", out)
+    assert "| collection | meshes | left out | NN | FT | ST | mAP |" in doc.read_text()
+
+
+def test_index_scale(tmp_path):
+    out = run("index_scale.py", "--dir", tmp_path, "--sizes", 2000, "--repeat", 2)
+    assert "| rows | rows now | build | commit of 1,000 rows s (median) | max | query s |" in out
+    assert re.search(rf"\| 2,000 \| 4,000 \| \d+ s \| {NUMBER} \| {NUMBER} \| {NUMBER} \|", out)

@@ -1,0 +1,95 @@
+"""Scene formats of the web (glTF, GLB, 3MF): read as one mesh in world coordinates."""
+
+import io
+
+import numpy as np
+import pytest
+import trimesh
+
+from cfsig.descriptors.signature import compute_signature, signature_file
+from cfsig.errors import MeshError
+from cfsig.files.demo import capsule, torus
+from cfsig.files.mesh import clean_mesh, read_mesh
+from cfsig.params import Params
+from tests.helpers import random_rotation
+
+
+def _scene(vertices, faces, pieces=3, seed=0):
+    """The mesh cut into ``pieces`` nodes, each stored in its own frame and placed back in the
+    scene by its node's transform, as modelling tools export parts."""
+    rng = np.random.default_rng(seed)
+    order = np.argsort(vertices[faces].mean(axis=1)[:, 0], kind="stable")
+    scene = trimesh.Scene()
+    for i, part in enumerate(np.array_split(order, pieces)):
+        transform = np.eye(4)
+        transform[:3, :3] = random_rotation(seed + i) * rng.uniform(0.5, 2.0)
+        transform[:3, 3] = rng.normal(size=3) * 10
+        local = (vertices - transform[:3, 3]) @ np.linalg.inv(transform[:3, :3]).T
+        piece = trimesh.Trimesh(local, faces[part], process=False)
+        piece.remove_unreferenced_vertices()
+        scene.add_geometry(piece, node_name=f"part{i}", transform=transform)
+    return scene
+
+
+@pytest.mark.parametrize("descriptor", ["intrinsic", "cf"])
+def test_a_glb_scene_is_the_mesh_it_was_cut_from(tmp_path, descriptor):
+    v, f = torus(wave=0.3, n_major=60, n_minor=20)  # below the copy's faces: no simplification
+    path = tmp_path / "ring.glb"
+    path.write_bytes(_scene(v, f).export(file_type="glb"))
+    read = read_mesh(path)
+    assert len(read.faces) == len(f) and len(read.vertices) == len(v)  # the seams welded
+    # In world coordinates: the nodes put back where they were cut, to float32's rounding.
+    assert np.allclose(np.sort(read.vertices, axis=0), np.sort(v, axis=0), atol=1e-5)
+    params = Params(descriptor=descriptor)
+    original = compute_signature(clean_mesh(v, f), params)
+    sig = signature_file(path, params)
+    assert sig.route == "clean" and sig.n_components == 1
+    # cf's histograms sum to 1 and the L1 distance of two is at most 2
+    scale = 2.0 if descriptor == "cf" else np.abs(original.vector).sum()
+    assert np.abs(original.vector - sig.vector).sum() < 1e-3 * scale
+
+
+def test_scene_parts_apart_stay_apart(tmp_path):
+    """Welding joins only what meets to float32's rounding: two separate parts stay two."""
+    v, f = capsule()
+    scene = trimesh.Scene()
+    for i in range(2):
+        place = np.eye(4)
+        place[0, 3] = 3.0 * i
+        scene.add_geometry(trimesh.Trimesh(v, f, process=False), node_name=f"c{i}", transform=place)
+    path = tmp_path / "two.glb"
+    path.write_bytes(scene.export(file_type="glb"))
+    read = read_mesh(path)
+    assert len(read.vertices) == 2 * len(v) and len(read.faces) == 2 * len(f)
+
+
+def test_gltf_with_its_buffer_beside_it(tmp_path):
+    v, f = capsule()
+    files = trimesh.Scene(trimesh.Trimesh(v, f, process=False)).export(file_type="gltf")
+    for name, data in files.items():
+        (tmp_path / name).write_bytes(data)
+    (gltf,) = tmp_path.glob("*.gltf")
+    assert np.allclose(read_mesh(gltf).vertices, v, atol=1e-6)
+    for buffer in tmp_path.glob("*.bin"):
+        buffer.unlink()
+    with pytest.raises(MeshError, match=str(gltf)):
+        read_mesh(gltf)
+
+
+def test_a_broken_glb_is_one_line_naming_the_file(tmp_path):
+    path = tmp_path / "broken.glb"
+    path.write_bytes(b"glTF" + bytes(40))
+    with pytest.raises(MeshError, match=f"^{path}: malformed GLB") as caught:
+        read_mesh(path)
+    assert "\n" not in str(caught.value)
+
+
+def test_the_glb_bytes_are_hashed_as_read(tmp_path):
+    v, f = capsule()
+    data = trimesh.Trimesh(v, f, process=False).export(file_type="glb")
+    path = tmp_path / "c.glb"
+    path.write_bytes(data)
+    assert (
+        signature_file(path, Params(descriptor="cf")).sha256
+        == __import__("hashlib").sha256(io.BytesIO(data).getvalue()).hexdigest()
+    )
