@@ -2,7 +2,7 @@
 
 The names below are the library's public API, so that ``import cfsig`` is enough::
 
-    with cfsig.IndexReader("shrec07.h5") as index:
+    with cfsig.IndexReader("shrec07-index") as index:
         query = cfsig.signature_file("ant/81.off", index.params).vector
         hits = cfsig.query(index, query[None], k=20)[0]
 

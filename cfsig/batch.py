@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # neither HDF5 in the workers, nor SciPy in the process that 
 
 _CONNECT_TIMEOUT = "20s"
 _COMMIT_SECONDS = 30.0
-_TASK_SECONDS = 0.5  # work per Dask task that batches aim at: docs/index-scale.md
+_TASK_SECONDS = 0.5  # work per Dask task that batches aim at: docs/performance.md
 _MAX_BATCH = 1000  # files per Dask task at most
 Compute = Callable[[Path, Params, str], "Signature"]
 
@@ -277,7 +277,7 @@ def _compute_on_cluster(
 
     Each task computes a batch of files, as many as the workers' reported seconds per file fit
     in `_TASK_SECONDS` (at most `_MAX_BATCH`, one until a first batch is back): Dask's cost per
-    task is then paid once per batch, not per file (docs/index-scale.md). A batch whose task
+    task is then paid once per batch, not per file (docs/performance.md). A batch whose task
     fails as a whole (its worker died, and Dask's retries too) is sent again file by file, so
     that a bad file fails alone, as it would in a task of its own. A worker's death also fails
     the tasks queued behind on it, so a file whose own task failed is sent once more with

@@ -17,6 +17,7 @@ if TYPE_CHECKING:
 _MODULES = {
     "intrinsic": "cfsig.descriptors.intrinsic",
     "cf": "cfsig.descriptors.cf",
+    "sh": "cfsig.descriptors.sh",
 }
 NAMES = tuple(_MODULES)  # the default first
 

@@ -5,10 +5,11 @@ histograms of adjacent scales on 17 bins per axis. An index built with `Params.p
 also keeps, for partial queries, the joint histogram of all the
 scales at once on finer bins: a vertex's cell is its first scale's bin and its steps from each
 scale's bin to the next, each clipped to within ``band`` bins, ``bins * (2 band + 1)^(k - 1)``
-cells for k scales (33 x 9^3 = 24,057 for version 10). A whole occupies a few hundred of
+cells for k scales (33 x 9^3 = 24,057 for the intrinsic descriptor's four). A whole occupies a few
+hundred of
 them, close to one per vertex of its simplified copy, so a part, a subset of its whole's
-surface, finds its own whole by them far more often than by the coarse channel (docs/partial.md,
-"Four scales jointly, on finer bins"). They are kept sparse: the cells a surface occupies and
+surface, finds its own whole by them far more often than by the coarse channel (docs/method.md).
+They are kept sparse: the cells a surface occupies and
 the share of its area in each, at most `SLOTS` of them per row of the index.
 """
 
@@ -54,7 +55,8 @@ def window_cells(values: np.ndarray, bins: int, band: int, joint: int) -> np.nda
     band : int
         Steps from one scale's bin to the next kept; larger steps are clipped to it.
     joint : int
-        Scales per window, 2 to k: 2 gives version 9's adjacent pairs (k - 1 windows), k one
+        Scales per window, 2 to k: 2 gives the curvature channel's adjacent pairs (k - 1 windows),
+        k one
         cell per vertex.
 
     Returns

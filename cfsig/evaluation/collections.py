@@ -207,7 +207,7 @@ def collection_from_index(path: str | os.PathLike) -> tuple[str, Collection]:
     Returns
     -------
     descriptor : str
-        The index's descriptor (``cf`` or ``cfhks``).
+        The index's descriptor (a name of `cfsig.descriptors.NAMES`).
     collection : Collection
         All its meshes in index order, labelled as indexed, untimed (``seconds`` None).
 
@@ -234,7 +234,7 @@ def evaluate_partial(
     Parameters
     ----------
     index : str or os.PathLike
-        An index of ``cfhks`` version 3 or later.
+        An index of the ``intrinsic`` descriptor.
     folder : str or os.PathLike
         Walked recursively for OFF, OBJ, PLY and STL files.
 

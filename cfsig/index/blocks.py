@@ -4,12 +4,13 @@ Where HDF5 stores rows as plain bytes (contiguous, or chunked by whole rows with
 file without a user block, read by the default driver), a block is read from the file with one
 ``preadv`` into a reused buffer, at the offset HDF5 reports: one copy from the page cache, no
 HDF5 in between. With a thread per core this scanned faster than memory-mapping each block,
-though one thread alone reads mapped blocks faster (`docs/query-options.md`); some columns
+though one thread alone reads mapped blocks faster (studied at commit 35f8114,
+docs/query-options.md); some columns
 of a block (`read_columns`) are copied from a memory map, which reads only those
-(docs/partial.md, "Scale"); and the fine cells, which a partial query reads whole and scores
+(docs/method.md); and the fine cells, which a partial query reads whole and scores
 where they lie, are viewed in one memory map of their file (`map_file`, `mapped_block`), its
-page table filled a block at a time: no copy at all (docs/partial.md, "Version 10: vector
-code"). Any other layout (compressed, compact, external, non-native byte
+page table filled a block at a time: no copy at all (docs/method.md). Any other layout (compressed,
+compact, external, non-native byte
 order, chunks not yet allocated) is read through h5py into the same buffer. Reading at fixed
 offsets is safe because the files of an index are never modified: a commit adds a segment file
 and renames a new manifest into place, and a merge deletes the files it replaced, which stay
@@ -31,7 +32,7 @@ from cfsig.errors import IndexFileError
 
 _PLAIN_TYPES = (np.dtype(np.float32), np.dtype(np.uint16))  # native: the bytes are the values
 # MADV_POPULATE_READ (Linux 5.14, not in Python's mmap module): a block's page table filled in
-# one call, not a fault per 64 KB (docs/partial.md, "Version 10: vector code").
+# one call, not a fault per 64 KB (docs/method.md).
 _POPULATE_READ = 22
 _DENSE = 4  # `read_rows` reads a whole block when it wants a quarter of its rows or more
 

@@ -3,11 +3,12 @@
 A row's sketch is the sums of its coordinates in groups of `GROUP` adjacent ones, less a
 centre that its segment stores. For any two rows a and b and any groups,
 ``sum_g |sum_{i in g} a_i - sum_{i in g} b_i| <= sum_i |a_i - b_i|``: the L1 distance of two
-sketches is at most that of their rows. A search scans the sketches (34 float32 a row for the
-542 of ``cfhks``), then computes exact distances only for the rows whose bound does not exceed
-the k-th best exact distance found (`cfsig.search.nearest`). Adjacent coordinates of ``cfhks`` are
-sorted quantile functions and nearly equal, so their differences keep their sign within a
-group and the bound is tight (docs/index-scale.md, where the group size was chosen).
+sketches is at most that of their rows. A search scans the sketches (51 float32 a row for the
+812 of the ``intrinsic`` descriptor), then computes exact distances only for the rows whose
+bound does not exceed the k-th best exact distance found (`cfsig.search.nearest`). Most of
+that descriptor's coordinates are sorted quantile functions, adjacent ones nearly equal, so
+their differences keep their sign within a group and the bound is tight (docs/method.md says
+how the group size was chosen).
 
 Every rounding is accounted for, so that the pruning never drops a row that the full float32
 scan would rank: the sketches are stored in float32, and each segment records the largest
@@ -23,7 +24,7 @@ from dataclasses import dataclass
 import h5py
 import numpy as np
 
-GROUP = 16  # coordinates summed per sketch entry: docs/index-scale.md
+GROUP = 16  # coordinates summed per sketch entry: docs/performance.md
 _U = 2.0**-24  # unit roundoff of float32
 _TINY = 2.0**-40  # bounds the float64 error of a group sum, relative to the sum of magnitudes
 _ROWS = 8192  # rows sketched at a time

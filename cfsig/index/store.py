@@ -25,6 +25,7 @@ import hashlib
 import json
 import math
 import os
+import shutil
 import zlib
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
@@ -448,6 +449,8 @@ class IndexWriter:
         self.path = Path(path)
         self.params = params
         self.merge = merge
+        if layout is not None and not self.path.exists():
+            _create(self.path, Manifest(params, layout, (), 1))
         self._lock = _acquire_lock(self.path)
         try:
             if (self.path / MANIFEST).exists():
@@ -462,7 +465,7 @@ class IndexWriter:
                 self._remove_orphans()
             elif layout is None:
                 raise ValueError(f"{self.path}: a new index needs its descriptor's layout")
-            else:  # a new index, empty, readable at once
+            else:  # an empty folder made an index
                 self._manifest = Manifest(params, layout, (), 1)
                 self._remove_orphans()  # of a writer killed before its first manifest
                 write_manifest(self.path, self._manifest)
@@ -1099,6 +1102,22 @@ def _acquire_lock(path: Path) -> IO[str]:
         lock.close()
         raise IndexFileError(f"{path}: another process is writing this index") from None
     return lock
+
+
+def _create(path: Path, manifest: Manifest) -> None:
+    """Create an empty index atomically: made aside with its manifest, then renamed into place,
+    so that a reader never finds the folder without one. Another writer's folder that won the
+    rename is left as it is."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.new")
+    shutil.rmtree(tmp, ignore_errors=True)  # left by a process of that number killed here
+    tmp.mkdir(parents=True)
+    write_manifest(tmp, manifest)
+    try:
+        os.rename(tmp, path)
+    except OSError:  # created meanwhile
+        shutil.rmtree(tmp, ignore_errors=True)
+    else:
+        _fsync(path.parent)
 
 
 def _ours(name: str) -> bool:

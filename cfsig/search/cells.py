@@ -64,7 +64,7 @@ def part_table(
         1 over the sum of its ``f p`` in units at each share; 0 past the shares.
     """
     held = np.unique(np.concatenate([np.asarray(c, np.int64) for c, _ in part]))
-    rows = np.zeros(1 << 16, np.uint16)  # 24,057 cells in version 10: rows fit in 16 bits
+    rows = np.zeros(1 << 16, np.uint16)  # 24,057 cells with partial cells: rows fit in 16 bits
     rows[held] = np.arange(1, len(held) + 1)
     table = np.zeros((len(held) + 1, 2, lanes), np.uint16)
     for j, ((c, p), share) in enumerate(zip(part, shares, strict=True)):

@@ -4,7 +4,7 @@ Two implementations fill the same output. The numpy one works everywhere and rea
 once per query in cache-sized pieces, three ufunc passes each. The faiss one (optional extra
 ``cfsig[fast]``) is one vectorised C++ loop, about twice as fast for one query and ten times for
 a batch, but importing faiss costs about 50 ms: it is used only when installed and the scan is
-large enough to repay that (`docs/query-options.md`).
+large enough to repay that (studied at commit 35f8114, docs/query-options.md).
 """
 
 from __future__ import annotations

@@ -25,7 +25,7 @@ from cfsig.search.l1 import Kernel, choose_kernel
 
 _BLOCK_ROWS = 16384  # rows per block of a dataset that is not chunked
 _OUT_CELLS = 1 << 20  # distances computed per kernel call (4 MB): bounds memory for many queries
-PRUNE_MIN_ROWS = 50_000  # rows with sketches from which a search prunes: docs/index-scale.md
+PRUNE_MIN_ROWS = 50_000  # rows with sketches from which a search prunes: docs/performance.md
 _BOUND_CELLS = 1 << 25  # bounds held at once (128 MB): the queries of one scan of the sketches
 _FIRST = 1024  # rows of smallest bounds evaluated first per query (at least 4 k)
 _SAMPLE = 65536  # bounds sampled to find the cutoff of those rows

@@ -45,11 +45,10 @@ from cfsig.search.nearest import Hit, l1_distances, nearest, parallel
 SHARES = tuple(2.0 ** (-j / 2) for j in range(7))  # a part's area over its whole's: 1 to 1/8
 # The shares at which a part's fine cells are measured (`Part.cells`): a fine histogram moves by
 # whole cells when the share is off by a factor sqrt(2), so twice as many, a factor 2^(1/4)
-# apart, of which `SHARES` are every other one (docs/partial.md, "Four scales jointly").
+# apart, of which `SHARES` are every other one (studied at commit 35f8114, docs/partial.md).
 FINE_SHARES = tuple(2.0 ** (-j / 4) for j in range(13))
 # The L1 distance's weight beside the unexplained share in `partial_scores`: chosen on SHREC 2007
-# alone, the best mean NN of its three kinds of parts (docs/partial.md, "The partial distance's
-# weight").
+# alone, the best mean NN of its three kinds of parts (docs/method.md, "Partial queries").
 HISTOGRAM_WEIGHT = 1.0
 # Rows from which the compiled kernel (extra ``cfsig[fast]``) repays loading it in a process's
 # first query.
