@@ -4,8 +4,9 @@
 
 Builds ``DIR/rows-N``, an index of N rows with fine curvature cells
 (``Params(partial_cells=True)``), unless it is already there: the demo collection
-(`cfsig.files.demo.make_demo_collection`, one mesh a class: 6) is computed once and its
-signatures are added again and again under distinct names, a commit every 100,000 rows.
+(`cfsig.files.demo.make_demo_collection`, one mesh a class: 6) is computed once; each row
+holds the fine cells of one of them and a vector mixed from two of them plus noise (`build`),
+a commit every 100,000 rows.
 
 Then times the whole command ``python -m cfsig query DIR/rows-N PART.off --partial`` in a fresh
 interpreter (its start, imports, the part's measurement and the search of every row included),
@@ -20,6 +21,7 @@ import statistics
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -29,20 +31,33 @@ import cfsig
 from cfsig.files.demo import make_demo_collection, write_off
 
 COMMIT_ROWS = 100_000
+NOISE = 0.05  # of each coordinate's spread over the demo meshes
 
 
 def build(index: Path, rows: int, demo: list[Path]) -> float:
-    """Write ``rows`` copies of the demo signatures with fine cells; the seconds taken."""
+    """Write ``rows`` rows with fine cells; the seconds taken. Each row holds the cells of one
+    demo mesh and, as its vector, a random mix of two demo meshes' vectors plus noise of
+    `NOISE` times each coordinate's spread over them: rows that look like real ones, not
+    copies, which would tie at distance 0 and defeat the whole-shape search's pruning."""
     start = time.perf_counter()
     params = cfsig.Params(partial_cells=True)
     signatures = [cfsig.signature_file(path, params) for path in demo]
+    vectors = np.array([s.vector for s in signatures])
+    spread = vectors.std(axis=0)
+    rng = np.random.default_rng(0)
     with cfsig.IndexWriter(index, params, cfsig.layout(params)) as writer:
-        for i in range(rows):
-            label = f"class{i % len(signatures)}"
-            name = f"{label}/{i}.off"
-            writer.add(cfsig.Entry(name, label, f"/rows/{name}"), signatures[i % len(signatures)])
-            if writer.pending >= COMMIT_ROWS:
-                writer.commit()
+        for first in range(0, rows, COMMIT_ROWS):
+            count = min(COMMIT_ROWS, rows - first)
+            a, b = rng.integers(0, len(vectors), (2, count))
+            t = rng.random((count, 1))
+            mixed = t * vectors[a] + (1 - t) * vectors[b]
+            mixed += NOISE * spread * rng.standard_normal(mixed.shape)
+            for j in range(count):
+                label = f"class{a[j]}"
+                name = f"{label}/{first + j}.off"
+                row = replace(signatures[a[j]], vector=mixed[j])
+                writer.add(cfsig.Entry(name, label, f"/rows/{name}"), row)
+            writer.commit()
     return time.perf_counter() - start
 
 

@@ -228,7 +228,7 @@ def partial_rows(name: str, folder: Path, paths: list[Path], tmp: Path, jobs: in
     rows = []
     for kind in KINDS:
         for ranked, index in indexes.items():
-            report, failures = cfsig.evaluate_partial(index, parts / kind)
+            report, failures = cfsig.evaluate_partial(index, parts / kind, jobs)
             for line in failures:
                 print(f"{name}, {kind}: {line}", file=sys.stderr)
             measures = [f"{report.measures[m]:.3f}" for m in PART_MEASURES]

@@ -540,8 +540,8 @@ def evaluate(
         raise click.UsageError("give a FOLDER or --index, not both")
     if parts:
         if not index_file or classes or plot or report_dir or descriptors:
-            raise click.UsageError("--partial takes --index and --json only")
-        _evaluate_partial(index_file, parts, as_json)
+            raise click.UsageError("--partial takes --index, --json and --jobs only")
+        _evaluate_partial(index_file, parts, as_json, jobs)
         return
     if index_file and descriptors:
         raise click.UsageError("--descriptor is for a FOLDER: an index holds one descriptor")
@@ -610,12 +610,12 @@ def evaluate(
     _report_skipped(skipped, strict)
 
 
-def _evaluate_partial(index_file: Path, parts: Path, as_json: bool) -> None:
+def _evaluate_partial(index_file: Path, parts: Path, as_json: bool, jobs: int | None) -> None:
     """Print the measures of partial queries against an index, and the parts that failed."""
     from cfsig.evaluation.collections import evaluate_partial
 
     try:
-        report, failures = evaluate_partial(index_file, parts)
+        report, failures = evaluate_partial(index_file, parts, jobs)
     except CfsigError as exc:
         _fail(str(exc))
     except ValueError as exc:

@@ -10,8 +10,10 @@ file
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -27,7 +29,7 @@ from cfsig.index.store import IndexReader
 from cfsig.isolate import Limits
 from cfsig.params import Params
 from cfsig.search.nearest import l1_distances
-from cfsig.search.partial import curvature_columns, expanded_distances, partial_file
+from cfsig.search.partial import Part, curvature_columns, expanded_distances, partial_file
 
 
 @dataclass(frozen=True)
@@ -222,7 +224,7 @@ def collection_from_index(path: str | os.PathLike) -> tuple[str, Collection]:
 
 
 def evaluate_partial(
-    index: str | os.PathLike, folder: str | os.PathLike
+    index: str | os.PathLike, folder: str | os.PathLike, jobs: int | None = None
 ) -> tuple[RetrievalReport, list[str]]:
     """Partial queries from a labelled folder against the whole shapes of an index.
 
@@ -236,7 +238,9 @@ def evaluate_partial(
     index : str or os.PathLike
         An index of the ``intrinsic`` descriptor.
     folder : str or os.PathLike
-        Walked recursively for OFF, OBJ, PLY and STL files.
+        Walked recursively for mesh files.
+    jobs : int, optional
+        Worker processes measuring the parts; default: the number of CPU cores.
 
     Returns
     -------
@@ -264,16 +268,30 @@ def evaluate_partial(
     if not found:
         raise MeshError(f"{folder}: no mesh files")
     rows, asked, failures = [], [], []
-    for path in found:
-        try:
-            part = partial_file(path, params)
+    paths = list(found)
+    if jobs == 1:
+        parts = [_measured_part(path, params) for path in paths]
+    else:
+        spawn = multiprocessing.get_context("spawn")  # no fork of a process holding h5py files
+        with ProcessPoolExecutor(jobs or os.cpu_count(), mp_context=spawn) as pool:
+            parts = list(pool.map(_measured_part, paths, [params] * len(paths), chunksize=4))
+    for path, part in zip(paths, parts, strict=True):
+        if isinstance(part, str):
+            failures.append(part)
+        else:
             rows.append(expanded_distances(part, signatures, params, cells))
             asked.append(mesh_label(path))
-        except MeshError as exc:
-            failures.append(str(exc))
     if not rows:
         raise MeshError(f"{folder}: no part could be computed")
     return evaluate_queries(np.array(rows), asked, [str(label) for label in labels]), failures
+
+
+def _measured_part(path: Path, params: Params) -> Part | str:
+    """A part measured in a worker (`partial_file`), or the line saying why it could not be."""
+    try:
+        return partial_file(path, params)
+    except MeshError as exc:
+        return str(exc)
 
 
 def evaluate_collections(

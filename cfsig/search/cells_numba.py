@@ -109,6 +109,8 @@ def _scores(
         gained[:] = 0
         whole = 0  # W
         for s in range(cells.shape[1]):
+            if s and cells[i, s] == 0:  # past a row's cells, ascending, come zeros only
+                break
             units = _area_units(fractions[i, s])
             if units == 0:  # an empty slot adds nothing
                 continue
