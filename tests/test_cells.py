@@ -115,9 +115,9 @@ def test_area_units_round_to_nearest():
     assert list(units) == [0, 0, 2, UNIT // 4, UNIT, UNIT, 0]  # ties to even; clipped to [0, 1]
 
 
-@pytest.mark.parametrize(("slots", "shares"), [(400, FINE_SHARES), (407, FINE_SHARES * 2)])
+@pytest.mark.parametrize(("slots", "shares"), [(400, FINE_SHARES), (407, FINE_SHARES[:5])])
 def test_compiled_scores_are_numpys(slots, shares):
-    pytest.importorskip("numba", reason="the compiled kernel is the extra cfsig[fast]")
+    pytest.importorskip("cfsig.search.cells_compiled", reason="built when cfsig is installed")
     rng = np.random.default_rng(5)
     part = [_histogram(rng, 200) for _ in shares]
     cells = np.zeros((300, slots), np.uint16)
@@ -144,14 +144,15 @@ def test_compiled_scores_are_numpys(slots, shares):
     assert empty == pytest.approx([2.0, 2.0], abs=1e-2)
 
 
-@pytest.mark.parametrize("case", ["small search", "not installed"])
-def test_numpy_scores_without_numba(monkeypatch, case):
-    part = [(np.array([1, 2]), np.array([0.5, 0.5]))]
+@pytest.mark.parametrize("case", ["small search", "not built", "too many shares"])
+def test_numpy_scores_where_the_compiled_kernel_does_not_serve(monkeypatch, case):
+    shares = (1.0,) * (17 if case == "too many shares" else 1)
+    part = [(np.array([1, 2]), np.array([0.5, 0.5]))] * len(shares)
     rows = FAST_MIN_ROWS - 1 if case == "small search" else FAST_MIN_ROWS
-    if case == "not installed":
-        monkeypatch.setitem(sys.modules, "cfsig.search.cells_numba", None)  # import fails
-        monkeypatch.delattr("cfsig.search.cells_numba", raising=False)
-    scorer = part_scorer(part, (1.0,), rows)
+    if case == "not built":
+        monkeypatch.setitem(sys.modules, "cfsig.search.cells_compiled", None)  # import fails
+        monkeypatch.delattr("cfsig.search.cells_compiled", raising=False)
+    scorer = part_scorer(part, shares, rows)
     cells, fractions = np.array([[1, 2]], np.uint16), np.array([[0.5, 0.5]], np.float32)
     assert isinstance(scorer, functools.partial) and scorer.func is cell_scores
     assert scorer(cells, fractions)[0] == 0.0
@@ -233,10 +234,10 @@ def test_damaged_or_missing_cells_are_named(tmp_path):
 
 @pytest.fixture(params=["numpy", "compiled"])
 def kernel(request, monkeypatch):
-    """The fine cells scored by NumPy's kernel, or by the compiled one (skipped without
-    numba)."""
+    """The fine cells scored by NumPy's kernel, or by the compiled one (skipped where it was
+    not built)."""
     if request.param == "compiled":
-        pytest.importorskip("numba", reason="the compiled kernel is the extra cfsig[fast]")
+        pytest.importorskip("cfsig.search.cells_compiled", reason="built when cfsig is installed")
     fast_min_rows = 0 if request.param == "compiled" else 1 << 62
     monkeypatch.setattr("cfsig.search.partial.FAST_MIN_ROWS", fast_min_rows)
     return request.param

@@ -3,7 +3,7 @@
 A part's score against a whole is, at the best of its shares, the share of the part's cells
 that the whole's cannot hold plus the area the two do not share (docs/method.md, "Partial
 queries"). The shares of an area are summed as integers in units of ``1 / UNIT``, so that the
-NumPy reference `cell_scores` and the compiled kernel (`cfsig.search.cells_numba`) give the same
+NumPy reference `cell_scores` and the compiled kernel (`cfsig.search.cells_compiled`) give the same
 scores to the last bit.
 """
 
@@ -30,7 +30,7 @@ def area_units(fractions: np.ndarray) -> np.ndarray:
     -------
     units : uint16 array, the shape of ``fractions``
         ``fractions * UNIT`` in float32, rounded to the nearest integer (ties to even), as
-        `cfsig.search.cells_numba` rounds them.
+        `cfsig.search.cells_compiled` rounds them.
     """
     scaled = np.asarray(fractions, np.float32) * np.float32(UNIT)
     return np.rint(np.clip(scaled, 0, UNIT)).astype(np.uint16)
@@ -91,7 +91,7 @@ def cell_scores(
     summed in integers, on the fractions in units of ``1 / UNIT`` (`area_units`; method.md,
     section 19): ``1 - E / F`` and ``(P + W - 2 C) / UNIT``, with ``E`` and ``C`` the sums of
     ``min(f p, w)`` and ``min(p, w)``, ``F`` and ``P`` those of ``f p`` and ``p``, ``W`` that
-    of ``w``; `cfsig.search.cells_numba` computes the same numbers.
+    of ``w``; `cfsig.search.cells_compiled` computes the same numbers.
 
     Parameters
     ----------

@@ -50,8 +50,7 @@ FINE_SHARES = tuple(2.0 ** (-j / 4) for j in range(13))
 # The L1 distance's weight beside the unexplained share in `partial_scores`: chosen on SHREC 2007
 # alone, the best mean NN of its three kinds of parts (docs/method.md, "Partial queries").
 HISTOGRAM_WEIGHT = 1.0
-# Rows from which the compiled kernel (extra ``cfsig[fast]``) repays loading it in a process's
-# first query.
+# Rows from which the compiled kernel repays laying out the part's table for it.
 FAST_MIN_ROWS = 500
 # A part's scores of blocks of wholes: ``scorer(cells, fractions)`` as `cell_scores`.
 Scorer = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -488,8 +487,9 @@ def part_scorer(
     part, shares
         As `cfsig.search.cells.cell_scores`.
     rows : int
-        Rows the search will score: from `FAST_MIN_ROWS`, numba's kernel if numba is installed
-        (`cfsig.search.cells_numba`), else NumPy's: the same scores.
+        Rows the search will score: from `FAST_MIN_ROWS`, the kernel compiled when cfsig was
+        installed (`cfsig.search.cells_compiled`) for parts of at most its ``MAX_SHARES``
+        shares; else, or where it was not built, NumPy's: the same scores.
 
     Returns
     -------
@@ -499,9 +499,11 @@ def part_scorer(
     """
     if rows >= FAST_MIN_ROWS:
         try:
-            from cfsig.search import cells_numba  # numba takes a second to import: only here
-        except ImportError:
+            import cfsig.search.cells_compiled as cells_compiled
+        except ImportError:  # installed without a C compiler
             pass
         else:
-            return cells_numba.part_scorer(part, shares)
+            if len(shares) <= cells_compiled.MAX_SHARES:
+                scorer: Scorer = cells_compiled.part_scorer(part, shares)
+                return scorer
     return partial(cell_scores, part, shares)
