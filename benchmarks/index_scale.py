@@ -2,7 +2,7 @@
 
     python benchmarks/index_scale.py --dir DIR --sizes 1000000 [10000000] [--repeat 5]
 
-For each size N, builds ``DIR/rows-N`` (or reuses it) with `cfsig.IndexWriter`: N rows of the
+For each size N, builds ``DIR/scale-N`` (or reuses it) with `cfsig.IndexWriter`: N rows of the
 default parameters, each a random mix of the signatures of two demo meshes
 (`cfsig.files.demo.make_demo_collection`) plus Gaussian noise of `NOISE` times each
 coordinate's standard deviation over them, rows that look like real signatures; written in
@@ -102,7 +102,7 @@ def main() -> None:
     rows = Rows(args.dir / "demo")
     lines = []
     for n in args.sizes:
-        path = args.dir / f"rows-{n}"
+        path = args.dir / f"scale-{n}"
         built = "reused" if (path / "manifest.h5").exists() else f"{build(path, n, rows):.0f} s"
         commits, queries = commit_seconds(path, rows, args.repeat), query_seconds(path, rows)
         with cfsig.IndexReader(path) as reader:
@@ -111,7 +111,7 @@ def main() -> None:
             [f"{n:,}", f"{count:,}", built, f"{statistics.median(commits):.3f}",
              f"{max(commits):.3f}", f"{statistics.median(queries):.3f}"]
         )  # fmt: skip
-        print(f"rows-{n}: done", flush=True)
+        print(f"scale-{n}: done", flush=True)
     heads = ["rows", "rows now", "build", "commit of 1,000 rows s (median)", "max", "query s"]
     print(table(heads, lines))
 

@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from cfsig.errors import MeshError, MissingDependencyError
 from cfsig.files.elements import Edges, mesh_edges
@@ -497,6 +496,8 @@ def weld_close(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.
     faces : (m, 3) int64
         The triangles on them.
     """
+    from scipy.spatial import cKDTree  # a fifth of a second to import: only for scenes
+
     tolerance = WELD_TOLERANCE * float(np.linalg.norm(np.ptp(vertices, axis=0)))
     pairs = cKDTree(vertices).query_pairs(tolerance, output_type="ndarray")
     if not len(pairs):
