@@ -1,12 +1,14 @@
 """The index at scale: the time of a commit and of a query against the number of rows.
 
-    python benchmarks/index_scale.py --dir DIR --sizes 1000000 [10000000] [--repeat 5]
+    python benchmarks/index_scale.py --dir DIR --sizes 1000000 [--real INDEX] [--repeat 5]
 
 For each size N, builds ``DIR/scale-N`` (or reuses it) with `cfsig.IndexWriter`: N rows of the
-default parameters, each a random mix of the signatures of two demo meshes
-(`cfsig.files.demo.make_demo_collection`) plus Gaussian noise of `NOISE` times each
-coordinate's standard deviation over them, rows that look like real signatures; written in
-commits of 1,000,000 rows, no merging while building. Then measures, in this process:
+default parameters, each a random mix of two signatures of the index ``--real`` (``cfsig index
+DATA/shrec07 -o INDEX``) plus Gaussian noise of `NOISE` times each coordinate's standard
+deviation over them, rows that look like real signatures; without ``--real``, of the six demo
+meshes (`cfsig.files.demo.make_demo_collection`), too few for rows as varied as real ones, on
+which the search prunes little. Written in commits of 1,000,000 rows, no merging while
+building. Then measures, in this process:
 
 - commit: open a writer, add 1,000 new rows, commit (median of ``--repeat``, merges included);
 - query: open a reader, the 20 nearest rows of one new row with their names (`cfsig.query`),
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import time
 from pathlib import Path
 
@@ -36,9 +39,15 @@ K = 20
 class Rows:
     """Synthetic rows: two real signatures mixed, plus noise."""
 
-    def __init__(self, folder: Path) -> None:
-        demo = make_demo_collection(folder, per_class=1)
-        self.real = np.array([cfsig.signature_file(p, PARAMS).vector for p in demo])
+    def __init__(self, folder: Path, real: Path | None = None) -> None:
+        if real is not None:  # an index of a collection: rows as varied as real ones
+            with cfsig.IndexReader(real) as reader:
+                if reader.params != PARAMS:
+                    sys.exit(f"{real}: not an index of the default parameters")
+                self.real = reader.signatures[:].astype(np.float64)
+        else:  # the six demo meshes: too few to be varied, and the search prunes little
+            demo = make_demo_collection(folder, per_class=1)
+            self.real = np.array([cfsig.signature_file(p, PARAMS).vector for p in demo])
         self.scale = NOISE * self.real.std(axis=0)
 
     def make(self, rng: np.random.Generator, n: int) -> np.ndarray:
@@ -98,8 +107,9 @@ def main() -> None:
     parser.add_argument("--dir", type=Path, required=True, help="folder of the indexes")
     parser.add_argument("--sizes", type=int, nargs="+", default=[1_000_000], help="rows")
     parser.add_argument("--repeat", type=int, default=5, help="commits timed per index")
+    parser.add_argument("--real", type=Path, help="an index of a collection to mix rows from")
     args = parser.parse_args()
-    rows = Rows(args.dir / "demo")
+    rows = Rows(args.dir / "demo", args.real)
     lines = []
     for n in args.sizes:
         path = args.dir / f"scale-{n}"
