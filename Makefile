@@ -18,7 +18,7 @@ test: $(BIN)/python
 	$(BIN)/ruff check cfsig tests benchmarks
 	$(BIN)/ruff format --check cfsig tests benchmarks
 	$(BIN)/mypy
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q -n auto
 
 # The tables of docs/results.md (hours on two cores). DATA: made by ../shared/data/unpack all DATA.
 bench: $(BIN)/python
