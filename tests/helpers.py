@@ -130,11 +130,15 @@ def random_signature(seed: int, bins: int = 200) -> Signature:
     )  # fmt: skip
 
 
+def open_writer(path: str | os.PathLike, params: Params | None = None, **options) -> IndexWriter:
+    """An `IndexWriter` of ``params`` (the ``cf`` descriptor's by default) with its layout."""
+    params = params or Params(descriptor="cf")
+    return IndexWriter(path, params, layout(params), **options)
+
+
 def build_index(path: str | os.PathLike, n: int = 10, params: Params | None = None) -> list:
     """An index of ``n`` random signatures in classes c0, c1, c2; return their vectors."""
-    with IndexWriter(
-        path, params or Params(descriptor="cf"), layout(params or Params(descriptor="cf"))
-    ) as w:
+    with open_writer(path, params) as w:
         for i in range(n):
             entry = Entry(f"c{i % 3}/{i}.off", f"c{i % 3}", f"/data/c{i % 3}/{i}.off")
             w.add(entry, random_signature(i))

@@ -15,13 +15,12 @@ import cfsig.index.store
 from cfsig import batch
 from cfsig.batch import compute_many, index_meshes
 from cfsig.cli import main
-from cfsig.descriptors import layout
 from cfsig.descriptors.signature import signature_file
 from cfsig.errors import ClusterError
-from cfsig.index.store import IndexReader, IndexWriter
+from cfsig.index.store import IndexReader
 from cfsig.params import Params
 from tests.crashing import signature_or_crash
-from tests.helpers import icosphere, torus, write_off
+from tests.helpers import icosphere, open_writer, torus, write_off
 
 
 @pytest.fixture
@@ -70,7 +69,7 @@ def test_index_meshes_adds_new_and_changed_files_only(meshes, tmp_path):
         yield from outcomes
         seen.append(total())
 
-    with IndexWriter(index, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as writer:
+    with open_writer(index) as writer:
         added, failures = index_meshes(writer, [meshes], jobs=2, progress=progress)
     assert added == 5 and seen == [6]
     assert len(failures) == 1 and failures[0].startswith(f"{meshes / 'ring' / 'broken.off'}: ")
@@ -81,7 +80,7 @@ def test_index_meshes_adds_new_and_changed_files_only(meshes, tmp_path):
     assert sorted(set(labels)) == ["ring", "round"]
     assert entry.path == str((meshes / "ring" / "d.off").resolve())
     write_off(meshes / "round" / "a.off", *torus(nu=20, nv=8))  # changed contents
-    with IndexWriter(index, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as writer:
+    with open_writer(index) as writer:
         added, failures = index_meshes(writer, [meshes], jobs=1, progress=progress)
     assert added == 1 and len(failures) == 1 and seen == [6, 2]  # a.off and broken.off again
     with IndexReader(index) as reader:
@@ -93,14 +92,10 @@ def test_index_meshes_adds_new_and_changed_files_only(meshes, tmp_path):
 
 
 def test_index_meshes_strict_and_taken_names(meshes, tmp_path):
-    with IndexWriter(
-        tmp_path / "strict.h5", Params(descriptor="cf"), layout(Params(descriptor="cf"))
-    ) as writer:
+    with open_writer(tmp_path / "strict.h5") as writer:
         added, failures = index_meshes(writer, [meshes], jobs=1, strict=True)
     assert added == 0 and len(failures) == 1  # ring/broken.off is the first file computed
-    with IndexWriter(
-        tmp_path / "twice.h5", Params(descriptor="cf"), layout(Params(descriptor="cf"))
-    ) as writer:
+    with open_writer(tmp_path / "twice.h5") as writer:
         added, failures = index_meshes(writer, [meshes / "round", meshes / "round"], jobs=1)
     assert added == 3 and len(failures) == 3
     assert all("is already taken by another file" in line for line in failures)
@@ -243,9 +238,7 @@ def test_index_meshes_computes_while_the_folder_is_scanned(meshes, tmp_path, mon
             yield outcome
 
     monkeypatch.setattr(batch, "find_meshes", slow_scan)
-    with IndexWriter(
-        tmp_path / "i", Params(descriptor="cf"), layout(Params(descriptor="cf"))
-    ) as writer:
+    with open_writer(tmp_path / "i") as writer:
         index_meshes(writer, [meshes], jobs=1, progress=progress)
     assert at_first_outcome[0] < 6  # the first signature came before the scan ended
     assert totals == sorted(totals) and totals[0] < totals[-1] == 6  # the total grew
@@ -255,8 +248,6 @@ def test_index_meshes_computes_while_the_folder_is_scanned(meshes, tmp_path, mon
     monkeypatch.setattr(
         cfsig.index.store.hashlib, "sha256", lambda data: hashed.append(data) or real_sha256(data)
     )
-    with IndexWriter(
-        tmp_path / "i", Params(descriptor="cf"), layout(Params(descriptor="cf"))
-    ) as writer:
+    with open_writer(tmp_path / "i") as writer:
         added, _ = index_meshes(writer, [meshes], jobs=1)
     assert added == 1 and len(hashed) == 5  # only the files whose names are indexed

@@ -17,7 +17,7 @@ from cfsig.descriptors.signature import compute_signature
 from cfsig.errors import IndexFileError
 from cfsig.files.mesh import clean_mesh
 from cfsig.index.blocks import plan_blocks
-from cfsig.index.store import Entry, IndexReader, IndexWriter, check_index
+from cfsig.index.store import Entry, IndexReader, check_index
 from cfsig.params import Params
 from cfsig.search.cells import UNIT, area_units, cell_scores
 from cfsig.search.partial import (
@@ -29,7 +29,7 @@ from cfsig.search.partial import (
     partial_distances,
     query_part,
 )
-from tests.helpers import random_signature, torus
+from tests.helpers import open_writer, random_signature, torus
 
 V10 = Params(partial_cells=True)
 
@@ -188,7 +188,7 @@ def _signature(seed):
 
 def test_an_index_keeps_the_cells_through_merges(tmp_path):
     index, want = tmp_path / "i", {}
-    with IndexWriter(index, V10, layout(V10)) as w:
+    with open_writer(index, V10) as w:
         for commit in range(3):
             for i in range(5):
                 name = f"c{i % 2}/{(commit * 3 + i) % 8}.off"  # some names again: superseded
@@ -201,7 +201,7 @@ def test_an_index_keeps_the_cells_through_merges(tmp_path):
             w.add(Entry("x/y.off", "x", "/x/y.off"), random_signature(0, layout(V10).length))
     for step in ("committed", "compacted"):
         if step == "compacted":
-            with IndexWriter(index, V10, layout(V10)) as w:
+            with open_writer(index, V10) as w:
                 w.compact()
                 assert len(w.segments) == 1
         with IndexReader(index) as r:
@@ -216,7 +216,7 @@ def test_an_index_keeps_the_cells_through_merges(tmp_path):
 
 def test_damaged_or_missing_cells_are_named(tmp_path):
     index = tmp_path / "i"
-    with IndexWriter(index, V10, layout(V10)) as w:
+    with open_writer(index, V10) as w:
         for i in range(4):
             w.add(Entry(f"c/{i}.off", "c", f"/c/{i}.off"), _signature(i))
     (segment,) = index.glob("seg-*.h5")
@@ -255,7 +255,7 @@ def _search_finds_the_nearest(reader, cells):
 
 def test_partial_search_reads_every_live_rows_cells(tmp_path, kernel):
     index = tmp_path / "i"
-    with IndexWriter(index, V10, layout(V10)) as w:
+    with open_writer(index, V10) as w:
         for commit in range(3):
             for i in range(6):
                 name = f"c{i % 2}/{(commit * 4 + i) % 10}.off"  # some again: dead rows
@@ -278,7 +278,7 @@ def test_partial_search_reads_every_live_rows_cells(tmp_path, kernel):
 
 def test_partial_search_reads_compressed_cells_through_h5py(tmp_path, kernel):
     index = tmp_path / "i"
-    with IndexWriter(index, V10, layout(V10)) as w:
+    with open_writer(index, V10) as w:
         for i in range(12):
             w.add(Entry(f"c/{i}.off", "c", f"/d/c/{i}.off"), _signature(i))
     (segment,) = index.glob("seg-*.h5")
@@ -296,7 +296,7 @@ def test_partial_search_reads_compressed_cells_through_h5py(tmp_path, kernel):
 
 def test_partial_search_without_memory_maps_reads_the_blocks(tmp_path, monkeypatch):
     index = tmp_path / "i"
-    with IndexWriter(index, V10, layout(V10)) as w:
+    with open_writer(index, V10) as w:
         for i in range(8):
             w.add(Entry(f"c/{i}.off", "c", f"/d/c/{i}.off"), _signature(i))
 
@@ -312,7 +312,7 @@ def test_partial_search_without_memory_maps_reads_the_blocks(tmp_path, monkeypat
 
 def test_cells_cut_short_after_opening_are_a_clear_error(tmp_path):
     index = tmp_path / "i"
-    with IndexWriter(index, V10, layout(V10)) as w:
+    with open_writer(index, V10) as w:
         for i in range(6):
             w.add(Entry(f"c/{i}.off", "c", f"/d/c/{i}.off"), _signature(i))
     with IndexReader(index) as reader:

@@ -14,11 +14,10 @@ import pytest
 from click.testing import CliRunner
 
 from cfsig.cli import main
-from cfsig.descriptors import layout
 from cfsig.files.demo import make_demo_collection
-from cfsig.index.store import FORMAT_VERSION, Entry, IndexReader, IndexWriter, check_index
+from cfsig.index.store import FORMAT_VERSION, Entry, IndexReader, check_index
 from cfsig.params import Params
-from tests.helpers import random_signature
+from tests.helpers import open_writer, random_signature
 
 
 @pytest.fixture(scope="module")
@@ -116,7 +115,7 @@ def test_reader_sees_committed_state_while_writer_commits(tmp_path, build_index)
     index = tmp_path / "i.h5"
     build_index(index, 5)
     with IndexReader(index) as reader:
-        with IndexWriter(index, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as writer:
+        with open_writer(index) as writer:
             writer.add(Entry("new.off", "x", "/new.off"), random_signature(50))
             writer.commit()
             assert len(reader) == 5  # the open reader keeps the state it opened

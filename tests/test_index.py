@@ -8,6 +8,7 @@ from cfsig.index.store import Entry, IndexReader, IndexWriter
 from cfsig.params import Params
 from cfsig.search.nearest import l1_distances, nearest, query
 from tests.helpers import build_index as _build
+from tests.helpers import open_writer
 from tests.helpers import random_signature as _sig
 
 
@@ -26,7 +27,7 @@ def test_round_trip(tmp_path):
 def test_update_replaces_by_name(tmp_path):
     path = tmp_path / "i.h5"
     _build(path, 4)
-    with IndexWriter(path, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as w:
+    with open_writer(path) as w:
         w.add(Entry("c1/1.off", "c1", "/x"), _sig(99))
         w.add(Entry("new.off", "z", "/y"), _sig(5))
     with IndexReader(path) as r:  # the new row of c1/1.off supersedes the old one
@@ -50,9 +51,9 @@ def test_other_params_refused(tmp_path):
 
 
 def test_second_writer_refused(tmp_path):
-    with IndexWriter(tmp_path / "i.h5", Params(descriptor="cf"), layout(Params(descriptor="cf"))):
+    with open_writer(tmp_path / "i.h5"):
         with pytest.raises(IndexFileError, match="another process"):
-            IndexWriter(tmp_path / "i.h5", Params(descriptor="cf"), layout(Params(descriptor="cf")))
+            open_writer(tmp_path / "i.h5")
 
 
 @pytest.mark.parametrize(
@@ -78,7 +79,7 @@ def test_bad_index_files(tmp_path, kind):
         IndexReader(path)
     if kind not in ("missing", "empty folder"):  # a writer makes an index in an empty folder
         with pytest.raises(IndexFileError, match=str(path)):
-            IndexWriter(path, Params(descriptor="cf"), layout(Params(descriptor="cf")))
+            open_writer(path)
 
 
 def test_nearest_matches_brute_force(tmp_path, monkeypatch):

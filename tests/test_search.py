@@ -7,14 +7,13 @@ import pytest
 import cfsig.index.segments
 import cfsig.search.l1
 import cfsig.search.nearest
-from cfsig.descriptors import layout
 from cfsig.descriptors.signature import Signature
 from cfsig.errors import IndexFileError
 from cfsig.index.blocks import plan_blocks, read_block, read_columns
-from cfsig.index.store import Entry, IndexReader, IndexWriter
-from cfsig.params import Params
+from cfsig.index.store import Entry, IndexReader
 from cfsig.search.l1 import choose_kernel, fast_kernel, l1_numpy
 from cfsig.search.nearest import nearest, query
+from tests.helpers import open_writer
 
 
 def _histograms(n, seed, bins=200):
@@ -38,7 +37,7 @@ def _brute_nearest(queries, rows, k):
 def _build(path, hists, chunk_rows, monkeypatch):
     monkeypatch.setattr(cfsig.index.segments, "_CHUNK_ROWS", chunk_rows)
     phi = np.zeros(1)
-    with IndexWriter(path, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as w:
+    with open_writer(path) as w:
         for i, h in enumerate(hists):
             sig = Signature(h, phi, 3, 1, 1, 0.0, (), 0.0, f"{i:064d}")
             w.add(Entry(f"m{i}.off", f"c{i % 4}", f"/d/m{i}.off"), sig)
@@ -203,7 +202,7 @@ def test_a_file_cut_short_after_opening_is_a_clear_error(tmp_path, monkeypatch):
 
 def test_empty_index_and_k_zero(tmp_path):
     path = tmp_path / "i.h5"
-    with IndexWriter(path, Params(descriptor="cf"), layout(Params(descriptor="cf"))):
+    with open_writer(path):
         pass
     with IndexReader(path) as r:
         rows, dist = nearest(r, _histograms(2, 9), 5)

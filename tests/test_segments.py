@@ -15,12 +15,11 @@ from click.testing import CliRunner
 
 import cfsig.index.store
 from cfsig.cli import main
-from cfsig.descriptors import layout
 from cfsig.errors import IndexFileError
 from cfsig.index.store import Entry, IndexReader, IndexWriter, check_index
 from cfsig.params import Params
 from cfsig.search.nearest import l1_distances, nearest
-from tests.helpers import icosphere, random_signature, write_off
+from tests.helpers import icosphere, open_writer, random_signature, write_off
 
 
 def _add(writer, names, seed=0):
@@ -42,7 +41,7 @@ def _contents(index):
 def test_commits_append_segments_merge_and_supersede(tmp_path, monkeypatch):
     monkeypatch.setattr(cfsig.index.store, "MERGE_FANOUT", 3)
     index, want = tmp_path / "i", {}
-    with IndexWriter(index, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as w:
+    with open_writer(index) as w:
         for c in range(10):  # one segment per commit, merged three at a time
             want.update(_add(w, [f"c{c % 3}/{c}-{i}.off" for i in range(4)], seed=100 * c))
             if c % 4 == 3:  # names of older segments again: their new rows supersede the old
@@ -66,7 +65,7 @@ def test_commits_append_segments_merge_and_supersede(tmp_path, monkeypatch):
     assert np.allclose(dist, np.sort(brute, axis=1)[:, :7], atol=1e-5)
     with (
         IndexReader(index) as before,
-        IndexWriter(index, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as w,
+        open_writer(index) as w,
     ):
         w.compact()
         assert len(w.segments) == 1 and w.segments[0].rows == len(want)
@@ -115,7 +114,7 @@ def test_check_names_what_is_damaged(tmp_path, part, build_index):
     assert any(f"{want}: checksum mismatch" in line for line in problems), problems
     bad = CliRunner().invoke(main, ["check", str(index)])
     assert bad.exit_code == 1 and want in bad.output and "Traceback" not in bad.output
-    with IndexWriter(index, Params(descriptor="cf"), layout(Params(descriptor="cf"))) as w:
+    with open_writer(index) as w:
         _add(w, ["new/x.off"])
         with pytest.raises(IndexFileError, match="checksum mismatch"):
             w.compact()  # a merge does not copy damage into a new segment
@@ -125,13 +124,12 @@ def test_check_names_what_is_damaged(tmp_path, part, build_index):
 _WRITE = textwrap.dedent(
     """
     import sys
-    from cfsig.descriptors import layout
-    from cfsig.index.store import Entry, IndexWriter
+    from cfsig.index.store import Entry
     from cfsig.params import Params
-    from tests.helpers import icosphere, random_signature, write_off
+    from tests.helpers import open_writer, random_signature
     index, what = sys.argv[1], sys.argv[2]
     params = Params(descriptor="cf", bins=16)
-    with IndexWriter(index, params, layout(params), merge=False) as w:
+    with open_writer(index, params, merge=False) as w:
         if what == "compact":
             w.compact()
         else:

@@ -25,9 +25,10 @@ from cfsig.index.sketch import (
     sketch_rows,
     threshold,
 )
-from cfsig.index.store import Entry, IndexReader, IndexWriter, check_index, compact_index, file_crc
+from cfsig.index.store import Entry, IndexReader, check_index, compact_index, file_crc
 from cfsig.params import Params
 from cfsig.search.nearest import nearest
+from tests.helpers import open_writer
 
 DEFAULT = Params()
 WIDTH = layout(DEFAULT).length
@@ -56,7 +57,7 @@ def _ties(n, seed, width=WIDTH):
 
 def _write(index, rows, names, seed=0):
     phi = np.zeros(1)
-    with IndexWriter(index, DEFAULT, layout(DEFAULT), merge=False) as w:
+    with open_writer(index, DEFAULT, merge=False) as w:
         for name, row in zip(names, rows, strict=True):
             sig = Signature(row, phi, 1, 1, 1, 0.0, (), "clean", 0.0, "")
             w.add(Entry(name, "c", f"/d/{name}"), sig)
