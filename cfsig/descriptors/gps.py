@@ -31,18 +31,16 @@ order of a, then b; it is compared by L1, the distance of Osada's histograms.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 from scipy.spatial.distance import cdist, pdist
 
 from cfsig.descriptors.base import Computed, Descriptor
 from cfsig.descriptors.cf import sample_phi
-from cfsig.descriptors.intrinsic import COARSE
+from cfsig.descriptors.intrinsic import COARSE, spectrum_of
 from cfsig.errors import SolverError
 from cfsig.files.mesh import Mesh
-from cfsig.operators.conformal import ConformalFactor, Operators, laplacian_solver, operators
-from cfsig.operators.spectrum import laplace_spectrum
+from cfsig.operators.conformal import ConformalFactor, Operators, operators
+from cfsig.operators.spectrum import Spectrum
 from cfsig.params import Layout, Params
 from cfsig.repair.simplify import simplified_mesh
 
@@ -56,34 +54,19 @@ PAIRS = SHELLS * (SHELLS + 1) // 2
 LENGTH = PAIRS * BINS
 
 
-def embedding(
-    ops: Operators, solve: Callable[[np.ndarray], np.ndarray] | None, solver: str
-) -> np.ndarray:
+def embedding(spectrum: Spectrum) -> np.ndarray:
     """The global point signature of each vertex of a surface.
 
     Parameters
     ----------
-    ops : Operators
-        The surface's operators.
-    solve : callable or None
-        Its factorised Laplacian when it is known (`ConformalFactor.solve`); None factorises it.
-    solver : {"auto", "cholmod", "eigen", "scipy"}
-        Sparse solver backend of the factorisation made here.
+    spectrum : Spectrum
+        Its smallest nonzero eigenpairs (`cfsig.descriptors.intrinsic.spectrum_of`).
 
     Returns
     -------
     gps : (n, k) float64
-        ``phi_i / sqrt(lambda_i)`` for the k = min(`EIGENPAIRS`, nonzero eigenvalues) smallest
-        eigenpairs, dimensionless.
-
-    Raises
-    ------
-    SolverError
-        The factorisation or the eigenvalue iteration failed.
+        ``phi_i / sqrt(lambda_i)`` for its k eigenpairs, dimensionless.
     """
-    if solve is None:
-        solve = laplacian_solver(ops.laplacian, ops.labels, solver)
-    spectrum = laplace_spectrum(ops.laplacian, ops.vertex_area, ops.labels, solve, EIGENPAIRS)
     return spectrum.eigenvectors / np.sqrt(spectrum.eigenvalues)
 
 
@@ -152,11 +135,12 @@ def gps_vector(mesh: Mesh, params: Params, cf: ConformalFactor | None, solver: s
     if coarse is not None:
         copy = operators(coarse)
         try:
-            return _distributions(coarse, copy, embedding(copy, None, solver), params.seed, None)
+            gps = embedding(spectrum_of(copy, None, solver, EIGENPAIRS))
+            return _distributions(coarse, copy, gps, params.seed, None)
         except SolverError:
             pass  # the mesh itself, as the intrinsic descriptor does
     ops = operators(mesh, params.mollify) if cf is None else cf.operators
-    gps = embedding(ops, None if cf is None else cf.solve, solver)
+    gps = embedding(spectrum_of(ops, None if cf is None else cf.solve, solver, EIGENPAIRS))
     return _distributions(mesh, ops, gps, params.seed, ops)
 
 
