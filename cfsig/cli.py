@@ -486,8 +486,10 @@ def query(index_file, meshes, k, solver, stage_timeout, as_json, png, partial) -
 @_json_option
 @click.option(
     "--plot",
-    type=_FILE,
-    help="Plot the precision/recall curves, overall and per class.",
+    type=_FOLDER,
+    help="Write DIR/precision_recall.png, the precision/recall curves overall and per class "
+    "(a curve per descriptor), and per class DIR/query_*.png, its first model's nearest (a row "
+    "per descriptor).",
 )
 @click.option(
     "--report",
@@ -533,7 +535,8 @@ def evaluate(
       cfsig evaluate shrec07/
       cfsig evaluate shrec07/ --descriptor cf,intrinsic
       cfsig evaluate shrec07/ --classes shrec07.cla --json
-      cfsig evaluate --index shrec07-index --plot pr.png --report report/
+      cfsig evaluate shrec07/ --descriptor cf,sh,gps,intrinsic --plot figures/
+      cfsig evaluate --index shrec07-index --report report/
       cfsig evaluate --index shrec07-index --partial scans/
     """
     if (folder is None) == (index_file is None):
@@ -546,8 +549,8 @@ def evaluate(
     if index_file and descriptors:
         raise click.UsageError("--descriptor is for a FOLDER: an index holds one descriptor")
     wanted = _descriptor_list(descriptors)
-    if len(wanted) > 1 and (plot or report_dir):
-        raise click.UsageError("--plot and --report take one descriptor")
+    if len(wanted) > 1 and report_dir:
+        raise click.UsageError("--report takes one descriptor")
     from cfsig.evaluation.collections import collection_from_index, evaluate_collections
     from cfsig.files.cla import read_cla
 
@@ -592,7 +595,6 @@ def evaluate(
             click.echo(_format_report(report))
         if result.seconds_per_mesh is not None and not as_json:
             click.echo(f"median seconds per mesh: {result.seconds_per_mesh:.3f}")
-        _evaluate_pictures(plot, report_dir, result)
     elif as_json:
         out = {
             name: {
@@ -607,6 +609,7 @@ def evaluate(
         click.echo(_format_side_by_side(results))
     if routes and not as_json:
         click.echo(_format_routes(routes))
+    _evaluate_pictures(plot, report_dir, results)
     _report_skipped(skipped, strict)
 
 
@@ -822,17 +825,15 @@ def _query_picture(png: Path, meshes, results, classes: set[str]) -> None:
         _warn_undrawn(figures.render_grid(rows, png))
 
 
-def _evaluate_pictures(plot, report_dir, result: Evaluation) -> None:
-    """The precision/recall plot and the HTML report of `evaluate`."""
-    from cfsig.figures import plots as figures
-    from cfsig.figures.report import write_report
+def _evaluate_pictures(plot, report_dir, results: dict[str, Evaluation]) -> None:
+    """The pictures of `evaluate`: the comparison of its descriptors, the one's HTML report."""
+    from cfsig.figures.report import write_comparison, write_report
 
-    report, kept = result.report, result.collection
-    columns = (kept.names, kept.labels, kept.paths)
     with _writing_pictures():
         if plot:
-            figures.plot_precision_recall(
-                report.class_precision_recall, report.precision_recall, plot
-            )
+            _warn_undrawn(write_comparison(plot, results))
         if report_dir:
-            _warn_undrawn(write_report(report_dir, report, *columns, result.distances))
+            (result,) = results.values()
+            kept = result.collection
+            columns = (kept.names, kept.labels, kept.paths)
+            _warn_undrawn(write_report(report_dir, result.report, *columns, result.distances))

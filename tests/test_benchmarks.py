@@ -84,3 +84,16 @@ def test_index_scale(tmp_path):
     out = run("index_scale.py", "--dir", tmp_path, "--sizes", 2000, "--repeat", 2)
     assert "| rows | rows now | build | commit of 1,000 rows s (median) | max | query s |" in out
     assert re.search(rf"\| 2,000 \| 4,000 \| \d+ s \| {NUMBER} \| {NUMBER} \| {NUMBER} \|", out)
+
+
+def test_peers(data, tmp_path):
+    pytest.importorskip("matplotlib")
+    figures = tmp_path / "figures"
+    args = ["--data", data / "shrec07", "--descriptors", "cf,gps", "--classes", "torus"]
+    out = run("peers.py", *args, "--out", figures, "--jobs", 1)
+    assert "| descriptor | NN | FT | ST | DCG | mAP | s per mesh |" in out
+    for name in ("cf", "gps"):
+        assert re.search(rf"\| `{name}` \|( {NUMBER} \|){{5}} [0-9.e-]+ \|", out)
+    assert re.search(rf"\| torus \| {NUMBER} \| {NUMBER} \|", out)
+    found = sorted(p.name for p in figures.iterdir())
+    assert found == ["precision_recall.png", "query_02_torus.png"]

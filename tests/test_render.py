@@ -9,10 +9,11 @@ from click.testing import CliRunner
 
 from cfsig.cli import main
 from cfsig.errors import MissingDependencyError
+from cfsig.evaluation.collections import Collection, Evaluation
 from cfsig.evaluation.measures import evaluate_distances
 from cfsig.figures import plots as figures
 from cfsig.figures import raster
-from cfsig.figures.report import write_report
+from cfsig.figures.report import write_comparison, write_report
 from cfsig.files.mesh import Mesh, clean_mesh, read_mesh
 from tests.helpers import icosphere, open_cylinder, random_rotation, torus, write_off
 
@@ -162,10 +163,14 @@ def test_histogram_and_precision_recall_plots(tmp_path):
     assert set(report.class_precision_recall) == {"x", "y", "z"}
     curves = np.array(list(report.class_precision_recall.values()))
     assert np.allclose(curves.mean(axis=0), report.precision_recall[:, 1])  # equal classes
-    figures.plot_precision_recall(
-        report.class_precision_recall, report.precision_recall, tmp_path / "pr.png"
-    )
+    figures.plot_precision_recall({"one": report}, tmp_path / "pr.png")
     _assert_picture(tmp_path / "pr.png", (4 * 260, 230))
+    other = evaluate_distances(rng.random((9, 9)), labels)
+    two = {"one": report, "other": other}
+    figures.plot_precision_recall(two, tmp_path / "pr2.png", classes=["z", "x"])
+    _assert_picture(tmp_path / "pr2.png", (3 * 260, 230))
+    with pytest.raises(ValueError, match="classes w"):
+        figures.plot_precision_recall(two, tmp_path / "pr3.png", classes=["w"])
 
 
 def test_grid_frames_results_and_marks_missing_files(tmp_path):
@@ -296,10 +301,10 @@ def test_cli_query_and_evaluate_pictures(tmp_path, collection):
     )
     assert run.exit_code == 0, run.output
     _assert_picture(tmp_path / "q2.png", (3 * 160, 2 * (160 + 34)))  # one row per query
-    pictures = ["--plot", str(tmp_path / "pr.png"), "--report", str(tmp_path / "rep")]
+    pictures = ["--plot", str(tmp_path / "pr"), "--report", str(tmp_path / "rep")]
     run = runner.invoke(main, ["evaluate", str(collection), "-j", "1", *pictures])
     assert run.exit_code == 0, run.output
-    _assert_picture(tmp_path / "pr.png", (3 * 260, 230))
+    _assert_picture(tmp_path / "pr" / "precision_recall.png", (3 * 260, 230))
     assert (tmp_path / "rep" / "index.html").is_file()
     (collection / "ring" / "0.off").rename(tmp_path / "moved.off")
     run = runner.invoke(
@@ -313,3 +318,31 @@ def test_cli_query_and_evaluate_pictures(tmp_path, collection):
         main, ["query", str(index), str(query), "-k", "4", "--png", str(tmp_path / "q3.png")]
     )
     assert run.exit_code == 0 and f"Warning: {gone}: missing" in run.output
+
+
+def test_cli_compares_descriptors_side_by_side(tmp_path, collection):
+    """--plot with several descriptors: the curves of each class, a curve per descriptor, and
+    per class its first model's nearest, a row per descriptor; --report takes one."""
+    out = tmp_path / "compare"
+    args = ["evaluate", str(collection), "-j", "1", "--descriptor", "cf,gps"]
+    run = CliRunner().invoke(main, [*args, "--plot", str(out)])
+    assert run.exit_code == 0, run.output
+    assert sorted(p.name for p in out.iterdir()) == [
+        "precision_recall.png", "query_01_long.png", "query_02_ring.png"
+    ]  # fmt: skip
+    _assert_picture(out / "precision_recall.png", (3 * 260, 230))
+    _assert_picture(out / "query_01_long.png", (2 * 100, 2 * (100 + 34)))  # query + 1 result
+    run = CliRunner().invoke(main, [*args, "--report", str(tmp_path / "rep")])
+    assert run.exit_code != 0 and "--report takes one descriptor" in run.output
+
+
+def test_comparison_needs_the_same_meshes(tmp_path):
+    labels = ["x", "x", "y", "y"]
+    distances = np.abs(np.subtract.outer(np.arange(4.0), np.arange(4.0)))
+    report = evaluate_distances(distances, labels)
+    names = ("x/0", "x/1", "y/0", "y/1")
+    make = lambda n: Evaluation(  # noqa: E731
+        report, Collection(n, tuple(labels), n, np.zeros((4, 1))), distances, None
+    )
+    with pytest.raises(ValueError, match="same meshes"):
+        write_comparison(tmp_path, {"a": make(names), "b": make(names[::-1])})

@@ -28,8 +28,8 @@ def sample_phi(
         Triangles.
     areas : (m,) float64
         Face areas.
-    phi : (n,) float64
-        Values at the vertices.
+    phi : (n,) or (n, d) float64
+        Values at the vertices: phi, or any d values per vertex.
     count : int
         Number of samples.
     seed : int
@@ -37,8 +37,8 @@ def sample_phi(
 
     Returns
     -------
-    samples : (count,) float64
-        Interpolated phi values, grouped by face in face order.
+    samples : (count,) or (count, d) float64
+        Interpolated values, grouped by face in face order.
     """
     rng = np.random.default_rng(seed)
     cumulative = np.cumsum(areas)
@@ -49,10 +49,10 @@ def sample_phi(
     ends[-1] = count  # a draw rounded up to the total area still belongs to the last face
     face = np.repeat(np.arange(len(faces)), np.diff(ends, prepend=0))
     corner = phi[faces]
+    per_sample = (count,) + (1,) * (phi.ndim - 1)  # broadcast over the columns of phi
     # phi = c0 + r1 ((c1 - c0) + r2 (c2 - c1)) with r1 = sqrt(u1), r2 = u2 (uniform points)
-    r1 = np.sqrt(rng.random(count))
-    samples = rng.random(count)
-    samples *= (corner[:, 2] - corner[:, 1])[face]
+    r1 = np.sqrt(rng.random(count)).reshape(per_sample)
+    samples = rng.random(count).reshape(per_sample) * (corner[:, 2] - corner[:, 1])[face]
     samples += (corner[:, 1] - corner[:, 0])[face]
     samples *= r1
     samples += corner[:, 0][face]

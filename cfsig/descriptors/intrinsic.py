@@ -201,9 +201,12 @@ def weigh(found: dict[str, np.ndarray]) -> np.ndarray:
 
 
 def spectrum_of(
-    ops: Operators, solve: Callable[[np.ndarray], np.ndarray] | None, solver: str
+    ops: Operators,
+    solve: Callable[[np.ndarray], np.ndarray] | None,
+    solver: str,
+    count: int = EIGENPAIRS,
 ) -> Spectrum:
-    """The `EIGENPAIRS` smallest nonzero eigenpairs of a surface.
+    """The ``count`` smallest nonzero eigenpairs of a surface.
 
     Parameters
     ----------
@@ -213,6 +216,8 @@ def spectrum_of(
         Its factorised Laplacian when it is known (`ConformalFactor.solve`); None factorises it.
     solver : {"auto", "cholmod", "eigen", "scipy"}
         Sparse solver backend of the factorisation made here.
+    count : int
+        Eigenpairs wanted [`EIGENPAIRS`].
 
     Returns
     -------
@@ -225,7 +230,7 @@ def spectrum_of(
     """
     if solve is None:
         solve = laplacian_solver(ops.laplacian, ops.labels, solver)
-    return laplace_spectrum(ops.laplacian, ops.vertex_area, ops.labels, solve, EIGENPAIRS)
+    return laplace_spectrum(ops.laplacian, ops.vertex_area, ops.labels, solve, count)
 
 
 def _on_copy(mesh: Mesh, cells: bool, solver: str) -> tuple[np.ndarray, Cells | None] | None:

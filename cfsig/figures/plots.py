@@ -11,15 +11,19 @@ random state, and the files carry no metadata.
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from cfsig.errors import CfsigError
 from cfsig.figures.raster import CMAP, colormap, require_matplotlib, shade_mesh, unit_interval
 from cfsig.files.mesh import Mesh, read_mesh
+
+if TYPE_CHECKING:
+    from cfsig.evaluation.measures import RetrievalReport
 
 _DPI = 100
 _PANEL, _CAPTION, _COLORBAR = 480, 40, 110  # pixels of `render_phi`
@@ -208,56 +212,62 @@ def plot_histograms(
 
 
 def plot_precision_recall(
-    curves: dict[str, np.ndarray],
-    overall: np.ndarray,
+    reports: Mapping[str, RetrievalReport],
     out: str | os.PathLike,
-    scores: dict[str, float] | None = None,
+    classes: Sequence[str] | None = None,
 ) -> None:
-    """Precision/recall curves: all queries, then one small panel per class.
+    """Precision/recall curves of one or several descriptors side by side (the paper's Figures
+    7, 9, 10 and 11): all queries, then one small panel per class, a curve per descriptor.
 
-    The first panel shows the curve over all queries in black over the class curves in grey;
-    each class panel shows its curve over the overall one (dashed). Panels are 260 x 230
-    pixels, five to a row.
+    Panels are 260 x 230 pixels, five to a row. The first panel's legend names each descriptor
+    with its mAP over all queries; with one descriptor, each panel's title holds its mAP.
 
     Parameters
     ----------
-    curves : dict[str, (20,) float]
-        Class name -> interpolated precision at recall 0.05, 0.10, ..., 1.00, in the order to
-        draw (e.g. `RetrievalReport.class_precision_recall`).
-    overall : (20, 2) float
-        Rows ``[recall, precision]`` over all queries (`RetrievalReport.precision_recall`).
+    reports : mapping of str to RetrievalReport
+        Descriptor name -> its evaluation, all of the same queries, in the order to draw.
     out : str or path-like
         The PNG file to write.
-    scores : dict[str, float], optional
-        A number to print in each panel's title (e.g. the mAP), keyed by class name and
-        ``"all"``.
+    classes : sequence of str, optional
+        The classes to draw, in order; default: every class of the first report.
 
     Raises
     ------
     MissingDependencyError
         matplotlib is not installed.
+    ValueError
+        A class asked for has no curve in every report.
     """
-    overall = np.asarray(overall, dtype=np.float64)
-    recall = overall[:, 0]
-    names = ["all", *curves]
+    first = next(iter(reports.values()))
+    names = ["all", *(first.per_class if classes is None else classes)]
+    missing = [
+        c for c in names[1:] if any(c not in r.class_precision_recall for r in reports.values())
+    ]
+    if missing:
+        raise ValueError(f"no precision/recall curve of the classes {', '.join(missing)}")
+    recall = first.precision_recall[:, 0]
     rows = -(-len(names) // _PR_COLUMNS)
     columns = min(len(names), _PR_COLUMNS)
     fig = _figure(columns * _PR_PANEL[0], rows * _PR_PANEL[1])
     axes = fig.subplots(rows, columns, squeeze=False, sharex=True, sharey=True)
     for ax, name in zip(axes.flat, names, strict=False):
-        if name == "all":
-            for curve in curves.values():
-                ax.plot(recall, curve, color="0.8", linewidth=0.8)
-            ax.plot(recall, overall[:, 1], color="black", linewidth=2)
-        else:
-            ax.plot(recall, overall[:, 1], color="0.5", linestyle="--", linewidth=1)
-            ax.plot(recall, curves[name], color="C0", linewidth=2, marker=".", markersize=4)
-        score = f" (mAP {scores[name]:.2f})" if scores and name in scores else ""
-        ax.set_title(f"{name}{score}", fontsize=9)
+        for i, (descriptor, report) in enumerate(reports.items()):
+            curve = (
+                report.precision_recall[:, 1]
+                if name == "all"
+                else report.class_precision_recall[name]
+            )
+            label = f"{descriptor} (mAP {report.measures['mAP']:.2f})"
+            ax.plot(recall, curve, color=f"C{i % 10}", linewidth=1.8, marker=".", markersize=4,
+                    label=label)  # fmt: skip
+        mean_ap = first.measures["mAP"] if name == "all" else first.per_class[name]["mAP"]
+        ax.set_title(f"{name} (mAP {mean_ap:.2f})" if len(reports) == 1 else name, fontsize=9)
         ax.set_xlim(0, 1)
         ax.set_ylim(0, 1.02)
         ax.grid(color="0.92")
         ax.tick_params(labelsize=7)
+    if len(reports) > 1:
+        axes.flat[0].legend(fontsize=6, loc="lower left")
     for ax in axes.flat[len(names) :]:
         ax.set_axis_off()
     for ax in axes[-1]:

@@ -1,0 +1,66 @@
+"""The paper's comparison of descriptors (its section 3.5, Figures 7 to 11), on a labelled folder.
+
+    python benchmarks/peers.py --data DATA/shrec07 [--descriptors cf,sh,gps,intrinsic]
+        [--classes ant,armadillo,bust] [--cla FILE] [--out docs/figures/peers] [--jobs N]
+
+For each descriptor, the signatures of every mesh ``DATA/<class>/<file>``
+(`cfsig.compute_collection`), ranked leave-one-out on the meshes that every descriptor could
+compute (`cfsig.evaluate_collections`; the classes are the folders, or ``--cla``'s). Prints the
+measures of each descriptor and the first tier per class drawn, as Markdown, and writes into
+OUT the pictures of `cfsig.figures.report.write_comparison` for the classes drawn (default: all):
+``precision_recall.png``, the curves of all queries and of each class, a curve per descriptor,
+and per class ``query_<number>_<class>.png``, its first model's nearest, a row per descriptor.
+On SHREC 2007 the paper's ants, armadillos and heads are ``ant,armadillo,bust``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from common import command, table
+
+import cfsig
+from cfsig.figures.report import write_comparison
+
+MEASURES = ("NN", "FT", "ST", "DCG", "mAP")
+
+
+def main() -> None:
+    """Compute, evaluate, print the tables and draw the pictures."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, required=True, help="folder of <class>/<file> meshes")
+    parser.add_argument("--descriptors", default="cf,sh,gps,intrinsic", help="comma-separated")
+    parser.add_argument("--classes", help="comma-separated classes to draw (default: all)")
+    parser.add_argument("--cla", type=Path, help="classes from a PSB .cla file")
+    parser.add_argument("--out", type=Path, required=True, help="folder of the pictures")
+    parser.add_argument("--jobs", type=int, help="worker processes (default: CPU cores)")
+    args = parser.parse_args()
+    collections = {}
+    for name in args.descriptors.split(","):
+        params = cfsig.Params(descriptor=name)
+        collections[name], failures = cfsig.compute_collection(args.data, params, jobs=args.jobs)
+        for line in failures:
+            print(f"skipped ({name}): {line}")
+    classes = cfsig.read_cla(args.cla) if args.cla else None
+    results = cfsig.evaluate_collections(collections, classes)
+    drawn = args.classes.split(",") if args.classes else None
+    problems = write_comparison(args.out, results, drawn)
+    first = next(iter(results.values())).report
+    print(f"Measured by `{command('peers.py')}`: {first.count} queries.\n")
+    rows = [
+        [f"`{name}`", *(f"{r.report.measures[m]:.3f}" for m in MEASURES), r.seconds_per_mesh]
+        for name, r in results.items()
+    ]
+    print(table(["descriptor", *MEASURES, "s per mesh"], rows), end="\n\n")
+    per_class = [
+        [cls, *(f"{r.report.per_class[cls]['FT']:.3f}" for r in results.values())]
+        for cls in drawn or first.per_class
+    ]
+    print(table(["class (FT)", *(f"`{name}`" for name in results)], per_class))
+    for line in problems:
+        print(f"not drawn: {line}")
+
+
+if __name__ == "__main__":
+    main()
