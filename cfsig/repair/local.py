@@ -44,15 +44,18 @@ def weld_copies(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np
 
     Returns
     -------
-    vertices : (k, 3) float64
-        One vertex per position.
+    vertices : (n, 3) float64
+        Unchanged; the copies are left unreferenced, for `clean_mesh` to remove, so that the
+        vertices keep their order.
     faces : (m, 3) int64
-        The triangles on them.
+        The triangles on the first vertex at each position.
     """
-    unique, inverse = np.unique(vertices + 0.0, axis=0, return_inverse=True)
+    unique, first, inverse = np.unique(
+        vertices + 0.0, axis=0, return_index=True, return_inverse=True
+    )
     if len(unique) == len(vertices):
         return vertices, faces
-    return unique, inverse.reshape(-1)[faces]
+    return vertices, first[inverse.reshape(-1)][faces]
 
 
 def drop_dangling(
