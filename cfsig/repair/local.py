@@ -237,7 +237,7 @@ def closed_parts(
     """Drop the closed parts inside another, join the parts that cross each other.
 
     A part's probe vertices (up to `PROBES`) are tested against the generalized winding number
-    of every other part whose bounding box meets its own: when at least `ENCLOSED_SHARE` of
+    (libigl's fast winding number) of every other part whose bounding box meets its own: when at least `ENCLOSED_SHARE` of
     them are inside, the part is hidden inner geometry and is dropped; when some are, the two
     cross. Parts that cross are joined by manifold3d's exact union, in a child process under
     ``limits``; parts apart stay as they are, each a part of the object (buttons, wheels).
@@ -283,22 +283,24 @@ def closed_parts(
     np.fill_diagonal(meet, False)
     area = np.bincount(face_part, face_areas(edge_lengths(vertices, faces)), n_parts)
     rng = np.random.default_rng(0)
+    probes = np.concatenate(
+        [rng.permutation(np.flatnonzero(labels == part))[:PROBES] for part in range(n_parts)]
+    )
+    probe_part = labels[probes]
+    per_part = np.bincount(probe_part, minlength=n_parts)
+    # share[p, q]: the share of p's probes inside q, by q's fast winding number (one tree per q).
+    share = np.zeros((n_parts, n_parts))
+    for other in np.flatnonzero(meet.any(axis=0)):
+        tested = meet[probe_part, other]
+        winding = igl.fast_winding_number(
+            vertices, faces[face_part == other], vertices[probes[tested]]
+        )
+        inside = np.bincount(probe_part[tested], np.abs(winding) > 0.5, n_parts)
+        share[:, other] = inside / per_part
     enclosed = np.zeros(n_parts, dtype=bool)
-    crossing = []
     for part in np.argsort(area, kind="stable"):  # the smallest first: the likeliest inside
-        others = np.flatnonzero(meet[part] & ~enclosed)
-        if len(others) == 0:
-            continue
-        members = np.flatnonzero(labels == part)
-        probes = vertices[rng.choice(members, size=min(PROBES, len(members)), replace=False)]
-        for other in others:
-            winding = igl.winding_number(vertices, faces[face_part == other], probes)
-            inside = float(np.mean(np.abs(winding) > 0.5))
-            if inside >= ENCLOSED_SHARE:
-                enclosed[part] = True
-                break
-            if inside > 0:
-                crossing.append((part, other))
+        enclosed[part] = np.any(share[part, ~enclosed] >= ENCLOSED_SHARE)
+    crossing = [(p, q) for p, q in zip(*np.nonzero((share > 0) | (share.T > 0)), strict=True)]
     kept = ~enclosed
     pairs = [(p, q) for p, q in crossing if kept[p] and kept[q]]
     if not pairs:
