@@ -12,17 +12,31 @@ measures how well each copy's signature finds its own clean original:
 ``FOLDER`` holds the clean meshes ``<class>/<file>`` (e.g. ``DATA/shrec07``); ``--every K``
 takes every k-th in sorted order.
 
-Kinds (`KINDS`; each copy is seeded by its file's name and the kind, so reruns are identical):
+Kinds (`KINDS`; each at several amounts, named ``<kind>-<amount>``; ``--kinds fins`` names
+every amount of a kind; each copy is seeded by its file's name and the kind, so reruns are
+identical):
 
-- ``soup``: every face has its own three vertices, faces shuffled, binary STL.
-- ``gaps``: cut into 2-4 parts by planes, each part its own vertices, moved 0.5% of the bounding
-  box diagonal away from its cut.
-- ``holes``: 3-6 holes of radius 1.5-3% of the diagonal, at most 5% of the faces.
-- ``fins``: 5% of the faces duplicated (some flipped), 10% flipped, 3-6 fins (a third face on an
-  edge) and one small closed sphere inside the shape.
-- ``inner``: 2-4 closed spheres or boxes hidden inside the shape.
+- ``fins-0.1%``, ``-1%``, ``-5%``: a fin (a third triangle on an edge, its tip 1% of the
+  bounding box diagonal off the edge's midpoint) on that share of the edges.
+- ``flips-5%``, ``-30%``: that share of the faces reversed.
+- ``holes-1``, ``-10``, ``-50``: that many holes of radius 1.5-3% of the diagonal, at most 5% of
+  the faces in all.
+- ``gaps-2``, ``-10``, ``-30``: cut by planes into that many pieces (a cut may leave more
+  parts), each with its own vertices, moved 0.5% of the diagonal away from its cuts.
+- ``inner-1``, ``-5``: closed spheres or boxes (radius 2-5% of the diagonal) hidden anywhere
+  inside the shape.
+- ``outside-1``, ``-5``: small closed spheres or boxes (radius 1-2%) beside the surface, apart
+  from it (buttons, eyes): parts of the object, which the repair keeps.
+- ``intersecting-1``, ``-5``: small closed spheres or boxes (radius 1-2%) centred on the
+  surface, crossing it.
+- ``mixture-2%``, ``-5%``: that share of the faces duplicated (half of the copies reversed),
+  2.5 times as many reversed, and fins on half as many edges.
 - ``overlap``: cut by a plane into two parts that overlap in a band of 3% of the diagonal, one
   moved by 0.1% of the diagonal so the bands interpenetrate.
+- ``soup``: every face has its own three vertices, faces shuffled, binary STL.
+- ``proxy`` (`PROXY_KINDS`): the clean mesh with a tiny closed sphere (radius 0.2%) just inside
+  its surface, measured with the repair mode ``proxy``: the proxy forced while the shape is
+  intact.
 
 Three more kinds (`SCAN_KINDS`, only when ``--kinds`` names them) are not mess for the repair
 stage to undo but the ways a scan of a shape differs from its model:
@@ -34,8 +48,9 @@ stage to undo but the ways a scan of a shape differs from its model:
 
 ``measure`` computes the clean signatures (the clean index) and the messy ones with
 `cfsig.batch.compute_many`; each messy copy queries the clean index by L1 and its original's
-rank is counted (ties pessimistically). The messy collection (file i replaced by its copy of
-kind i mod K, files in sorted order) and each single-kind collection are evaluated leave-one-out
+rank is counted (ties pessimistically), and the share of copies that took the proxy. The
+messy collection (file i replaced by its copy of kind i mod K, files in sorted order, the proxy
+kinds left out) and each single-kind collection are evaluated leave-one-out
 like the clean one. Files that fail are listed; they rank after every mesh (n + 1) and are left
 out of the collections they belong to.
 """

@@ -173,7 +173,9 @@ def _chair():
     seat = _box([0, 0, 1.0], [2, 2, 1.3])
     legs = [_box([x, y, 0.2], [x + 0.2, y + 0.2, 1.1]) for x in (0.1, 1.7) for y in (0.1, 1.7)]
     wheel_v, wheel_f = icosphere(2)
-    wheels = [(0.1 * wheel_v + [x + 0.1, y + 0.1, 0.08], wheel_f) for x in (0.1, 1.7) for y in (0.1, 1.7)]
+    wheels = [
+        (0.1 * wheel_v + [x + 0.1, y + 0.1, 0.08], wheel_f) for x in (0.1, 1.7) for y in (0.1, 1.7)
+    ]
     return seat, legs, wheels
 
 
@@ -209,9 +211,9 @@ def test_a_small_closed_part_beside_the_body_is_kept():
     mesh = clean_mesh(*_stack((v, f), button))
     repaired = repair_mesh(mesh)
     assert repaired.route == "repaired" and _closed_parts(repaired) == (2, True)
-    assert np.array_equal(repaired.vertices[: len(v)], v) or len(repaired.vertices) == len(
-        v
-    ) + len(button[0])
+    assert np.array_equal(repaired.vertices[: len(v)], v) or len(repaired.vertices) == len(v) + len(
+        button[0]
+    )
     params = Params(descriptor="cf")
     alone = compute_signature(clean_mesh(v, f), params).vector
     both = compute_signature(mesh, params)
@@ -224,5 +226,7 @@ def test_inner_parts_anywhere_inside_are_dropped():
     inner = [(0.1 * small[0] + c, small[1]) for c in ([0.8, 0, 0], [0, -0.7, 0.2], [0, 0, 0])]
     mesh = clean_mesh(*_stack((v, f), *inner))
     repaired = repair_mesh(mesh)
-    assert repaired.route == "repaired" and any("dropped 3 parts enclosed" in r for r in repaired.repairs)
+    assert repaired.route == "repaired" and any(
+        "dropped 3 parts enclosed" in r for r in repaired.repairs
+    )
     assert np.array_equal(repaired.vertices, v) and np.array_equal(repaired.faces, f)

@@ -95,9 +95,9 @@ def drop_dangling(
         counts = np.diff(edges.starts)
         if not np.any(counts > 2):
             break
-        per_face = np.empty(3 * len(faces), dtype=np.int64)
-        per_face[edges.order] = np.repeat(counts, counts)
-        per_face = per_face.reshape(-1, 3)
+        face_counts = np.empty(3 * len(faces), dtype=np.int64)
+        face_counts[edges.order] = np.repeat(counts, counts)
+        per_face = face_counts.reshape(-1, 3)
         n_sheets, sheet = _sheets(edges, counts, len(faces))
         sheet_area = np.bincount(sheet, area, n_sheets)
         is_open = np.bincount(sheet, (per_face == 1).any(axis=1), n_sheets) > 0
@@ -237,10 +237,10 @@ def closed_parts(
     """Drop the closed parts inside another, join the parts that cross each other.
 
     A part's probe vertices (up to `PROBES`) are tested against the generalized winding number
-    (libigl's fast winding number) of every other part whose bounding box meets its own: when at least `ENCLOSED_SHARE` of
-    them are inside, the part is hidden inner geometry and is dropped; when some are, the two
-    cross. Parts that cross are joined by manifold3d's exact union, in a child process under
-    ``limits``; parts apart stay as they are, each a part of the object (buttons, wheels).
+    (libigl's fast winding number) of every other part whose bounding box meets its own: when
+    at least `ENCLOSED_SHARE` of them are inside, the part is hidden inner geometry and is
+    dropped; when some are, the two cross. Parts that cross are joined by manifold3d's exact
+    union, in a child process under ``limits``; parts apart stay as they are, each a part of the object (buttons, wheels).
 
     Parameters
     ----------
@@ -326,7 +326,9 @@ def closed_parts(
     return np.vstack(new_vertices), np.vstack(new_faces), int(enclosed.sum()), n_joined
 
 
-def _unions(groups: list[list[tuple[np.ndarray, np.ndarray]]]) -> list[tuple[np.ndarray, np.ndarray]]:
+def _unions(
+    groups: list[list[tuple[np.ndarray, np.ndarray]]],
+) -> list[tuple[np.ndarray, np.ndarray]]:
     """manifold3d's exact union of each group of closed, outward-oriented parts."""
     import manifold3d
 
