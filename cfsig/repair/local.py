@@ -240,7 +240,8 @@ def closed_parts(
     (libigl's fast winding number) of every other part whose bounding box meets its own: when
     at least `ENCLOSED_SHARE` of them are inside, the part is hidden inner geometry and is
     dropped; when some are, the two cross. Parts that cross are joined by manifold3d's exact
-    union, in a child process under ``limits``; parts apart stay as they are, each a part of the object (buttons, wheels).
+    union, in a child process under ``limits``; parts apart stay as they are, each a part of
+    the object (buttons, wheels).
 
     Parameters
     ----------
