@@ -7,9 +7,12 @@ always welds, drops duplicates and degenerate faces and splits non-manifold vert
 numerics, and chooses one of three routes (docs/method.md, section 1b):
 
 - ``clean``: the mesh is one closed manifold; it passes unchanged, bit for bit.
-- ``repaired``: local repairs make it one: parts whose boundaries nearly meet are stitched,
-  small open fragments (fins, stray triangles) and parts enclosed by another part are dropped,
-  holes are closed by fans. The rest of the surface is kept exactly.
+- ``repaired``: local repairs make it closed manifold parts, for any amount of damage: fins,
+  dangling sheets and inner walls on non-manifold edges are dropped, T-junctions split, parts
+  whose boundaries nearly meet stitched, small open fragments dropped, holes closed by fans,
+  parts oriented, parts enclosed by another dropped and parts crossing another joined by their
+  union (`cfsig.repair.local`); closed parts apart are kept. The rest of the surface is kept
+  exactly.
 - ``proxy``: otherwise, the outer surface is rebuilt: the iso-surface, slightly outside the
   input, of its signed distance with the sign of the generalized winding number (libigl's
   ``offset_surface``), on a grid of a fixed number of cells along the longest side of the
