@@ -374,14 +374,13 @@ def outside(mesh: Mesh, rng: np.random.Generator, count: int) -> Mesh:
     vertices, faces = mesh
     diag, parts = diagonal(vertices), []
     points, normals = _surface_points(mesh, rng, 20 * count)
+    radii = rng.uniform(0.01, 0.02, size=len(points)) * diag
+    centers = points + 2 * radii[:, None] * normals
+    clear = igl.point_mesh_squared_distance(centers, vertices, faces)[0] > (1.5 * radii) ** 2
+    clear &= np.abs(igl.fast_winding_number(vertices, faces, centers)) <= 0.5
     placed: list[tuple[np.ndarray, float]] = []
-    for point, normal in zip(points, normals, strict=True):
-        radius = rng.uniform(0.01, 0.02) * diag
-        center = point + 2 * radius * normal
-        clear = igl.point_mesh_squared_distance(center[None], vertices, faces)[0][0]
-        apart = all(np.linalg.norm(center - c) > 1.5 * (radius + r) for c, r in placed)
-        inside = abs(igl.fast_winding_number(vertices, faces, center[None])[0]) > 0.5
-        if clear > (1.5 * radius) ** 2 and apart and not inside:
+    for center, radius in zip(centers[clear], radii[clear], strict=True):
+        if all(np.linalg.norm(center - c) > 1.5 * (radius + r) for c, r in placed):
             placed.append((center, radius))
             parts.append(_closed_part(center, radius, rng))
         if len(parts) == count:

@@ -139,12 +139,11 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
     if dropped:
         done.append(f"dropped {dropped} small open fragments")
     vertices, faces, edges = _tidy(vertices, faces)
-    open_parts = _open_parts(faces, len(vertices), edges)
+    if _open_parts(faces, len(vertices), edges) > 1:
+        return None
     vertices, faces, filled = fill_holes(vertices, faces, edges)
     if filled:
         done.append(f"closed {filled} holes")
-    if open_parts > 1:
-        return None
     vertices, faces, edges = _tidy(vertices, faces)
     faces = orient_parts(vertices, faces)
     labels = _face_graph(faces, len(vertices), edges)[2]
