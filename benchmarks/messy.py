@@ -33,6 +33,8 @@ identical):
   2.5 times as many reversed, and fins on half as many edges.
 - ``overlap``: cut by a plane into two parts that overlap in a band of 3% of the diagonal, one
   moved by 0.1% of the diagonal so the bands interpenetrate.
+- ``seams``: cut by a plane into two parts, the second's faces on the cut each split at that
+  edge's midpoint: T-junctions all along the seam.
 - ``soup``: every face has its own three vertices, faces shuffled, binary STL.
 - ``proxy`` (`PROXY_KINDS`): the clean mesh with a tiny closed sphere (radius 0.2%) just inside
   its surface, measured with the repair mode ``proxy``: the proxy forced while the shape is
@@ -410,6 +412,31 @@ def speck(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     return concatenate([mesh, icosphere(center, 0.002 * diag, 1)])
 
 
+def seams(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """Two parts cut by a plane, the second meshed anew along the cut: each of its faces on
+    the cut is split at that edge's midpoint, a vertex inside the first part's edge
+    (T-junctions, as where two sides of a seam were meshed independently)."""
+    vertices, faces = mesh
+    below, above, _, _ = _split(mesh, np.arange(len(faces)), rng)
+    first = faces[below]
+    half = np.sort(np.column_stack([first.ravel(), first[:, [1, 2, 0]].ravel()]), axis=1)
+    keys, counts = np.unique(half, axis=0, return_counts=True)
+    cut = {(int(i), int(j)) for i, j in keys[counts == 1]}
+    new_vertices, new_faces = [vertices], [first]
+    count = len(vertices)
+    for face in faces[above]:
+        for j in range(3):
+            a, b, c = face[j], face[(j + 1) % 3], face[(j + 2) % 3]
+            if (min(a, b), max(a, b)) in cut:
+                new_vertices.append(((vertices[a] + vertices[b]) / 2)[None])
+                new_faces.append(np.array([[a, count, c], [count, b, c]]))
+                count += 1
+                break
+        else:
+            new_faces.append(face[None])
+    return np.vstack(new_vertices), np.vstack(new_faces).astype(np.int64)
+
+
 def overlap(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     """Two parts cut by a plane, each also keeping a band of 3% of the diagonal past the cut.
 
@@ -460,6 +487,7 @@ MESS_KINDS: dict[str, Kind] = {
     **{f"intersecting-{n}": partial(intersecting, count=n) for n in (1, 5)},
     **{f"mixture-{p:g}%": partial(mixture, share=p / 100) for p in (2, 5)},
     "overlap": overlap,
+    "seams": seams,
     "soup": soup,
 }
 # The proxy forced on clean meshes: measured with the repair mode "proxy".

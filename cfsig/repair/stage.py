@@ -130,7 +130,8 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
         if not split:
             break
         done.append(f"split boundary edges at {split} T-junctions")
-        vertices, faces, edges = _tidy(vertices, faces)
+        # The seam's corners were split apart as non-manifold while it was open: weld them.
+        vertices, faces, edges = _tidy(*weld_copies(vertices, faces))
     # Each step gets the faces cleaned after the one before, with the edges of that cleaning.
     vertices, faces, stitched = stitch(vertices, faces, edges, STITCH_DISTANCE * diagonal)
     if stitched:
