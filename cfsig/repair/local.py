@@ -347,6 +347,8 @@ def _unions(
                 raise StageLimitError(f"a part is not a closed manifold: {solid.status()}")
             solids.append(solid)
         union = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add).to_mesh64()
+        if len(union.tri_verts) == 0:
+            raise StageLimitError("the union of crossing parts came out empty")
         results.append(
             (np.asarray(union.vert_properties[:, :3], dtype=np.float64),
              np.asarray(union.tri_verts, dtype=np.int64))
