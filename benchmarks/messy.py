@@ -12,17 +12,33 @@ measures how well each copy's signature finds its own clean original:
 ``FOLDER`` holds the clean meshes ``<class>/<file>`` (e.g. ``DATA/shrec07``); ``--every K``
 takes every k-th in sorted order.
 
-Kinds (`KINDS`; each copy is seeded by its file's name and the kind, so reruns are identical):
+Kinds (`KINDS`; each at several amounts, named ``<kind>-<amount>``; ``--kinds fins`` names
+every amount of a kind; each copy is seeded by its file's name and the kind, so reruns are
+identical):
 
-- ``soup``: every face has its own three vertices, faces shuffled, binary STL.
-- ``gaps``: cut into 2-4 parts by planes, each part its own vertices, moved 0.5% of the bounding
-  box diagonal away from its cut.
-- ``holes``: 3-6 holes of radius 1.5-3% of the diagonal, at most 5% of the faces.
-- ``fins``: 5% of the faces duplicated (some flipped), 10% flipped, 3-6 fins (a third face on an
-  edge) and one small closed sphere inside the shape.
-- ``inner``: 2-4 closed spheres or boxes hidden inside the shape.
+- ``fins-0.1%``, ``-1%``, ``-5%``: a fin (a third triangle on an edge, its tip 1% of the
+  bounding box diagonal off the edge's midpoint) on that share of the edges.
+- ``flips-5%``, ``-30%``: that share of the faces reversed.
+- ``holes-1``, ``-10``, ``-50``: that many holes of radius 1.5-3% of the diagonal, at most 5% of
+  the faces in all.
+- ``gaps-2``, ``-10``, ``-30``: cut by planes into that many pieces (a cut may leave more
+  parts), each with its own vertices, moved 0.5% of the diagonal away from its cuts.
+- ``inner-1``, ``-5``: closed spheres or boxes (radius 2-5% of the diagonal) hidden anywhere
+  inside the shape.
+- ``outside-1``, ``-5``: small closed spheres or boxes (radius 1-2%) beside the surface, apart
+  from it (buttons, eyes): parts of the object, which the repair keeps.
+- ``intersecting-1``, ``-5``: small closed spheres or boxes (radius 1-2%) centred on the
+  surface, crossing it.
+- ``mixture-2%``, ``-5%``: that share of the faces duplicated (half of the copies reversed),
+  2.5 times as many reversed, and fins on half as many edges.
 - ``overlap``: cut by a plane into two parts that overlap in a band of 3% of the diagonal, one
   moved by 0.1% of the diagonal so the bands interpenetrate.
+- ``seams``: cut by a plane into two parts, the second's faces on the cut each split at that
+  edge's midpoint: T-junctions all along the seam.
+- ``soup``: every face has its own three vertices, faces shuffled, binary STL.
+- ``proxy`` (`PROXY_KINDS`): the clean mesh with a tiny closed sphere (radius 0.2%) just inside
+  its surface, measured with the repair mode ``proxy``: the proxy forced while the shape is
+  intact.
 
 Three more kinds (`SCAN_KINDS`, only when ``--kinds`` names them) are not mess for the repair
 stage to undo but the ways a scan of a shape differs from its model:
@@ -34,8 +50,9 @@ stage to undo but the ways a scan of a shape differs from its model:
 
 ``measure`` computes the clean signatures (the clean index) and the messy ones with
 `cfsig.batch.compute_many`; each messy copy queries the clean index by L1 and its original's
-rank is counted (ties pessimistically). The messy collection (file i replaced by its copy of
-kind i mod K, files in sorted order) and each single-kind collection are evaluated leave-one-out
+rank is counted (ties pessimistically), and the share of copies that took the proxy. The
+messy collection (file i replaced by its copy of kind i mod K, files in sorted order, the proxy
+kinds left out) and each single-kind collection are evaluated leave-one-out
 like the clean one. Files that fail are listed; they rank after every mesh (n + 1) and are left
 out of the collections they belong to.
 """
@@ -49,6 +66,8 @@ import shlex
 import sys
 import tempfile
 from collections.abc import Callable, Sequence
+from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import common
@@ -236,28 +255,31 @@ def _split(mesh: Mesh, part: np.ndarray, rng: np.random.Generator) -> tuple:
     return part[~side], part[side], normal, offset
 
 
-def gaps(mesh: Mesh, rng: np.random.Generator) -> Mesh:
-    """2-4 parts cut by planes, each with its own vertices, moved apart by small gaps.
+def gaps(mesh: Mesh, rng: np.random.Generator, count: int) -> Mesh:
+    """``count`` parts cut by planes, each with its own vertices, moved apart by small gaps.
 
     The largest part is cut again until there are enough; each part then moves by 0.5% of the
     diagonal in a random direction on the far side of its cuts.
     """
     diag = diagonal(mesh[0])
     parts = [(np.arange(len(mesh[1])), np.zeros(3))]  # faces, sum of outward cut normals
-    for _ in range(int(rng.integers(2, 5)) - 1):
+    for _ in range(count - 1):
         faces, away = parts.pop(int(np.argmax([len(p) for p, _ in parts])))
         below, above, normal, _ = _split(mesh, faces, rng)
         parts += [(below, away - normal), (above, away + normal)]
     pieces = []
     for faces, away in parts:
-        direction = away / np.linalg.norm(away) + 0.5 * unit_vector(rng)
+        if len(faces) == 0:
+            continue
+        direction = away / max(np.linalg.norm(away), 1e-12) + 0.5 * unit_vector(rng)
         shift = 0.005 * diag * direction / np.linalg.norm(direction)
         pieces.append(submesh(mesh, faces, shift))
     return concatenate(pieces)
 
 
-def holes(mesh: Mesh, rng: np.random.Generator) -> Mesh:
-    """3-6 holes: the faces whose centroids are near a random seed face's, at most 5% overall.
+def holes(mesh: Mesh, rng: np.random.Generator, count: int) -> Mesh:
+    """``count`` holes: the faces whose centroids are near a random seed face's, at most 5%
+    of the faces overall.
 
     A hole that would pass the budget takes only the faces nearest its seed. A hole that would
     cut the surface in two (around a thin part) is drawn again elsewhere, its radius halved
@@ -267,13 +289,13 @@ def holes(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     diag, c = diagonal(vertices), centroids(mesh)
     removed = np.zeros(len(faces), dtype=bool)
     budget, parts = int(0.05 * len(faces)), components(faces)
-    for _ in range(int(rng.integers(3, 7))):
+    for _ in range(count):
         radius = rng.uniform(0.015, 0.03) * diag
         for attempt in range(30):
             seed = int(rng.choice(np.flatnonzero(~removed)))
             dist = np.linalg.norm(c - c[seed], axis=1)
             near = np.flatnonzero((dist < radius * 0.5 ** (attempt // 10)) & ~removed)
-            near = near[np.argsort(dist[near])][: budget - int(removed.sum())]
+            near = near[np.argsort(dist[near])][: max(budget - int(removed.sum()), 1)]
             trial = removed.copy()
             trial[near] = True
             if components(faces[~trial]) == parts:
@@ -282,44 +304,137 @@ def holes(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     return submesh(mesh, ~removed)
 
 
-def fins(mesh: Mesh, rng: np.random.Generator) -> Mesh:
-    """Duplicated and flipped faces, 3-6 fins and one small sphere inside.
+def _fin_faces(mesh: Mesh, rng: np.random.Generator, share: float) -> tuple[np.ndarray, Mesh]:
+    """Fins on ``share`` of the edges (at least one): the new tip vertices and fin faces.
 
-    5% of the faces are repeated (half of the copies with reversed order), another 10% are
-    reversed, and each fin is a new triangle on an edge of a further face whose third vertex
-    sits 1% of the diagonal off the edge's midpoint along that face's normal.
+    Each fin is a new triangle on an edge whose third vertex sits 1% of the diagonal off the
+    edge's midpoint, along the normal of one of the edge's faces.
     """
     vertices, faces = mesh
-    m, diag = len(faces), diagonal(vertices)
-    order = rng.permutation(m)
-    n_dup, n_flip, n_fins = round(0.05 * m), round(0.10 * m), int(rng.integers(3, 7))
-    dup = faces[order[:n_dup]].copy()
-    reverse = rng.random(n_dup) < 0.5
-    dup[reverse] = dup[reverse, ::-1]
+    half = np.column_stack([faces.ravel(), faces[:, [1, 2, 0]].ravel()])
+    _, first = np.unique(np.sort(half, axis=1), axis=0, return_index=True)
+    count = max(1, round(share * len(first)))
+    picked = rng.choice(first, size=count, replace=False)
+    host, (a, b) = picked // 3, half[picked].T
+    tips = (vertices[a] + vertices[b]) / 2 + 0.01 * diagonal(vertices) * face_normals(mesh)[host]
+    return tips, np.column_stack([b, a, len(vertices) + np.arange(count)])
+
+
+def fins(mesh: Mesh, rng: np.random.Generator, share: float) -> Mesh:
+    """Fins (a third triangle on an edge, its tip off the surface) on ``share`` of the edges."""
+    tips, fin = _fin_faces(mesh, rng, share)
+    return np.vstack([mesh[0], tips]), np.vstack([mesh[1], fin])
+
+
+def flips(mesh: Mesh, rng: np.random.Generator, share: float) -> Mesh:
+    """``share`` of the faces reversed."""
+    vertices, faces = mesh
     out = faces.copy()
-    flipped = order[n_dup : n_dup + n_flip]
-    out[flipped] = out[flipped, ::-1]
-    hosts = order[n_dup + n_flip : n_dup + n_flip + n_fins]
-    corner = rng.integers(3, size=n_fins)
-    a, b = faces[hosts, corner], faces[hosts, (corner + 1) % 3]
-    tips = (vertices[a] + vertices[b]) / 2 + 0.01 * diag * face_normals(mesh)[hosts]
-    tip_index = len(vertices) + np.arange(n_fins)
-    fin_faces = np.column_stack([b, a, tip_index])
-    body = (np.vstack([vertices, tips]), np.vstack([out, dup, fin_faces]))
-    center, radius = inner_centers(mesh, [0.02 * diag], rng)
-    return concatenate([body, *(icosphere(x, r) for x, r in zip(center, radius, strict=True))])
+    picked = rng.choice(len(faces), size=round(share * len(faces)), replace=False)
+    out[picked] = out[picked, ::-1]
+    return vertices, out
 
 
-def inner(mesh: Mesh, rng: np.random.Generator) -> Mesh:
-    """2-4 closed spheres or boxes (radius 2-5% of the diagonal) hidden inside the shape."""
+def mixture(mesh: Mesh, rng: np.random.Generator, share: float) -> Mesh:
+    """Duplicated, flipped and finned faces at once: ``share`` of the faces repeated (half of
+    the copies reversed), 2.5 times as many reversed, and fins on half as many edges."""
+    vertices, faces = flips(mesh, rng, 2.5 * share)
+    dup = faces[rng.choice(len(faces), size=round(share * len(faces)), replace=False)]
+    reverse = rng.random(len(dup)) < 0.5
+    dup[reverse] = dup[reverse, ::-1]
+    tips, fin = _fin_faces(mesh, rng, share / 2)
+    return np.vstack([vertices, tips]), np.vstack([faces, dup, fin])
+
+
+def _closed_part(center: np.ndarray, radius: float, rng: np.random.Generator) -> Mesh:
+    """A sphere or a box, at random."""
+    return icosphere(center, radius) if rng.random() < 0.5 else box(center, radius, rng)
+
+
+def inner(mesh: Mesh, rng: np.random.Generator, count: int) -> Mesh:
+    """``count`` closed spheres or boxes (radius 2-5% of the diagonal) hidden inside the shape."""
     diag = diagonal(mesh[0])
-    radii = rng.uniform(0.02, 0.05, size=int(rng.integers(2, 5))) * diag
+    radii = rng.uniform(0.02, 0.05, size=count) * diag
     centers, used = inner_centers(mesh, radii, rng)
-    parts = [
-        icosphere(x, r) if rng.random() < 0.5 else box(x, r, rng)
-        for x, r in zip(centers, used, strict=True)
-    ]
+    parts = [_closed_part(x, r, rng) for x, r in zip(centers, used, strict=True)]
     return concatenate([mesh, *parts])
+
+
+def _surface_points(mesh: Mesh, rng: np.random.Generator, count: int) -> tuple:
+    """Centroids of ``count`` random faces and their unit normals, faces drawn by area."""
+    vertices, faces = mesh
+    tri = vertices[faces]
+    area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    picked = rng.choice(len(faces), size=count, p=area / area.sum())
+    return centroids(mesh)[picked], face_normals(mesh)[picked]
+
+
+def outside(mesh: Mesh, rng: np.random.Generator, count: int) -> Mesh:
+    """``count`` small closed spheres or boxes (radius 1-2% of the diagonal) beside the shape:
+    each off a random point of the surface, along its normal, by twice its radius (buttons,
+    eyes, bolts), apart from the body and from each other."""
+    vertices, faces = mesh
+    diag, parts = diagonal(vertices), []
+    points, normals = _surface_points(mesh, rng, 20 * count)
+    radii = rng.uniform(0.01, 0.02, size=len(points)) * diag
+    centers = points + 2 * radii[:, None] * normals
+    clear = igl.point_mesh_squared_distance(centers, vertices, faces)[0] > (1.5 * radii) ** 2
+    clear &= np.abs(igl.fast_winding_number(vertices, faces, centers)) <= 0.5
+    placed: list[tuple[np.ndarray, float]] = []
+    for center, radius in zip(centers[clear], radii[clear], strict=True):
+        if all(np.linalg.norm(center - c) > 1.5 * (radius + r) for c, r in placed):
+            placed.append((center, radius))
+            parts.append(_closed_part(center, radius, rng))
+        if len(parts) == count:
+            break
+    return concatenate([mesh, *parts])
+
+
+def intersecting(mesh: Mesh, rng: np.random.Generator, count: int) -> Mesh:
+    """``count`` closed spheres or boxes (radius 1-2% of the diagonal) centred on random points
+    of the surface: each half inside the shape, half out, their surfaces crossing its."""
+    diag = diagonal(mesh[0])
+    points, _ = _surface_points(mesh, rng, count)
+    radii = rng.uniform(0.01, 0.02, size=count) * diag
+    return concatenate(
+        [mesh, *(_closed_part(x, r, rng) for x, r in zip(points, radii, strict=True))]
+    )
+
+
+def speck(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """A tiny closed sphere (radius 0.2% of the diagonal) just inside the surface, so that the
+    mesh is not clean and a forced proxy runs while the shape itself is intact."""
+    diag = diagonal(mesh[0])
+    points, normals = _surface_points(mesh, rng, 20)
+    centers = np.vstack([points - 0.004 * diag * normals, points + 0.004 * diag * normals])
+    winding = np.abs(igl.fast_winding_number(*mesh, centers))
+    center = centers[int(np.argmax(winding > 0.5))]
+    return concatenate([mesh, icosphere(center, 0.002 * diag, 1)])
+
+
+def seams(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """Two parts cut by a plane, the second meshed anew along the cut: each of its faces on
+    the cut is split at that edge's midpoint, a vertex inside the first part's edge
+    (T-junctions, as where two sides of a seam were meshed independently)."""
+    vertices, faces = mesh
+    below, above, _, _ = _split(mesh, np.arange(len(faces)), rng)
+    first = faces[below]
+    half = np.sort(np.column_stack([first.ravel(), first[:, [1, 2, 0]].ravel()]), axis=1)
+    keys, counts = np.unique(half, axis=0, return_counts=True)
+    cut = {(int(i), int(j)) for i, j in keys[counts == 1]}
+    new_vertices, new_faces = [vertices], [first]
+    count = len(vertices)
+    for face in faces[above]:
+        for j in range(3):
+            a, b, c = face[j], face[(j + 1) % 3], face[(j + 2) % 3]
+            if (min(a, b), max(a, b)) in cut:
+                new_vertices.append(((vertices[a] + vertices[b]) / 2)[None])
+                new_faces.append(np.array([[a, count, c], [count, b, c]]))
+                count += 1
+                break
+        else:
+            new_faces.append(face[None])
+    return np.vstack(new_vertices), np.vstack(new_faces).astype(np.int64)
 
 
 def overlap(mesh: Mesh, rng: np.random.Generator) -> Mesh:
@@ -360,20 +475,29 @@ def noise(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     return _jitter(mesh, rng, 0.1)
 
 
-MESS_KINDS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
-    "fins": fins,
-    "gaps": gaps,
-    "holes": holes,
-    "inner": inner,
+Kind = Callable[[Mesh, np.random.Generator], Mesh]
+# Each kind of mess at each amount: the amounts run from light to heavy.
+MESS_KINDS: dict[str, Kind] = {
+    **{f"fins-{p:g}%": partial(fins, share=p / 100) for p in (0.1, 1, 5)},
+    **{f"flips-{p:g}%": partial(flips, share=p / 100) for p in (5, 30)},
+    **{f"holes-{n}": partial(holes, count=n) for n in (1, 10, 50)},
+    **{f"gaps-{n}": partial(gaps, count=n) for n in (2, 10, 30)},
+    **{f"inner-{n}": partial(inner, count=n) for n in (1, 5)},
+    **{f"outside-{n}": partial(outside, count=n) for n in (1, 5)},
+    **{f"intersecting-{n}": partial(intersecting, count=n) for n in (1, 5)},
+    **{f"mixture-{p:g}%": partial(mixture, share=p / 100) for p in (2, 5)},
     "overlap": overlap,
+    "seams": seams,
     "soup": soup,
 }
-SCAN_KINDS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
+# The proxy forced on clean meshes: measured with the repair mode "proxy".
+PROXY_KINDS: dict[str, Kind] = {"proxy": speck}
+SCAN_KINDS: dict[str, Kind] = {
     "light-noise": light_noise,
     "noise": noise,
     "remesh": remesh,
 }
-KINDS = {**MESS_KINDS, **SCAN_KINDS}
+KINDS = {**MESS_KINDS, **PROXY_KINDS, **SCAN_KINDS}
 SUFFIX = {"soup": ".stl"}  # the other kinds are written as OFF
 
 
@@ -572,10 +696,19 @@ def measure(
     files = [f for f in files if f in clean]
     labels = [f.parent.name for f in files]
     paths = {kind: [messy_path(out, kind, f) for f in files] for kind in kinds}
-    messy, failures = signatures([p for ps in paths.values() for p in ps], params, args.jobs)
+    messy: dict = {}
+    failures: list[str] = []
+    for forced in (False, True):  # the proxy kinds with the repair mode "proxy"
+        chosen = [p for kind in kinds if (kind in PROXY_KINDS) == forced for p in paths[kind]]
+        found, failed = signatures(
+            chosen, replace(params, repair="proxy") if forced else params, args.jobs
+        )
+        messy.update(found)
+        failures += failed
     index = np.array([vector(clean[f]) for f in files])
     n, copies, collections = len(files), [], {"clean": collection(list(index), labels)}
-    mixed = [paths[kinds[i % len(kinds)]][i] for i in range(n)]
+    mess = [kind for kind in kinds if kind not in PROXY_KINDS] or kinds
+    mixed = [paths[mess[i % len(mess)]][i] for i in range(n)]
     collections["messy (kinds round-robin)"] = collection(
         [vector(messy[p]) if p in messy else None for p in mixed], labels
     )
@@ -597,6 +730,10 @@ def measure(
                 "rank 1 %": 100.0 * float(np.mean(ranks[kind] == 1)),
                 "rank 1 %, duplicates as one": 100.0 * float(np.mean(ranks_as_one[kind] == 1)),
                 "top 5 %": 100.0 * float(np.mean(ranks[kind] <= 5)),
+                "proxy %": 100.0
+                * float(
+                    np.mean([messy[p].route == "proxy" for p in paths[kind] if p in messy] or [0.0])
+                ),
                 "median rank": float(np.median(ranks[kind])),
                 "median s": common.median(seconds) if seconds else float("nan"),
             }
@@ -685,8 +822,9 @@ def main() -> None:
     parser.add_argument("stage", choices=("write", "measure", "run"))
     parser.add_argument("--out", type=Path, help="folder of the messy copies (default: temporary)")
     parser.add_argument(
-        "--kinds", nargs="+", choices=sorted(KINDS), default=sorted(MESS_KINDS),
-        help="kinds of copy [the six kinds of mess]",
+        "--kinds", nargs="+", default=[*MESS_KINDS, *PROXY_KINDS], metavar="KIND",
+        help="kinds of copy, each a name of KINDS or a family (\"fins\": every amount) "
+        "[every kind of mess, and the forced proxy]",
     )  # fmt: skip
     parser.add_argument("--jobs", type=int, default=2, help="worker processes for signatures")
     parser.add_argument("--descriptor", choices=DESCRIPTORS, default="intrinsic")
@@ -703,9 +841,21 @@ def main() -> None:
             stage(args, Path(tmp))
 
 
+def chosen_kinds(names: Sequence[str]) -> list[str]:
+    """The kinds named, a family standing for its every amount, in the order of `KINDS`."""
+    unknown = [
+        name
+        for name in names
+        if name not in KINDS and not any(k.startswith(f"{name}-") for k in KINDS)
+    ]
+    if unknown:
+        raise SystemExit(f"unknown kinds {unknown}; choose from {', '.join(KINDS)} or a family")
+    return [k for k in KINDS if any(k == name or k.startswith(f"{name}-") for name in names)]
+
+
 def stage(args: argparse.Namespace, out: Path) -> None:
     """Write the copies into ``out`` and/or measure them; print, and save as asked."""
-    files, kinds = clean_files(args.data, args.every), sorted(set(args.kinds))
+    files, kinds = clean_files(args.data, args.every), chosen_kinds(args.kinds)
     checks = write_all(out, files, kinds, args.check) if args.stage != "measure" else []
     if args.stage == "write":
         return

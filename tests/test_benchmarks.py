@@ -73,10 +73,14 @@ def test_per_mesh(data):
 
 def test_messy(data, tmp_path):
     doc = tmp_path / "messy.md"
-    args = ["--data", data / "shrec07", "--every", 2, "--kinds", "holes", "--check", 1]
+    args = ["--data", data / "shrec07", "--every", 2, "--kinds", "holes-10", "proxy", "--check", 1]
     out = run("messy.py", "run", *args, "--jobs", 1, "--doc", doc)
-    assert "| kind | copies | failed | rank 1 % |" in out
-    assert re.search(r"\| holes \| 3 \| 0 \| [\d.]+ \|", out)
+    assert (
+        "| kind | copies | failed | rank 1 % | rank 1 %, duplicates as one | top 5 % | proxy % |"
+        in out
+    )
+    assert re.search(r"\| holes-10 \| 3 \| 0 \| [\d.]+ \| [\d.]+ \| [\d.]+ \| 0 \|", out)
+    assert re.search(r"\| proxy \| 3 \| 0 \| [\d.]+ \| [\d.]+ \| [\d.]+ \| 100 \|", out)
     assert "| collection | meshes | left out | NN | FT | ST | mAP |" in doc.read_text()
 
 

@@ -219,7 +219,7 @@ def test_fin_and_stray_fragment_are_dropped():
     mesh = clean_mesh(fv, ff)
     repaired = repair_mesh(mesh)
     assert repaired.route == "repaired"
-    assert _has(repaired, "dropped 2 small open fragments")
+    assert _has(repaired, "dropped 1 fins") and _has(repaired, "dropped 1 small open fragments")
     assert _one_closed_manifold(repaired) and len(repaired.faces) == len(f)
     clean = compute_signature(clean_mesh(v, f), Params(descriptor="cf"))
     fixed = compute_signature(mesh, Params(descriptor="cf"))
@@ -229,8 +229,8 @@ def test_fin_and_stray_fragment_are_dropped():
 
 
 def test_too_many_parts_go_to_the_proxy(monkeypatch):
-    monkeypatch.setattr(repair, "MAX_PARTS", 2)
-    result = repair_mesh(clean_mesh(*_fin_and_stray()))  # three parts: sphere, fin, stray
+    monkeypatch.setattr(repair, "MAX_PARTS", 1)
+    result = repair_mesh(clean_mesh(*_fin_and_stray()))  # two parts: finned sphere, stray
     assert result.route == "proxy" and not _has(result, "fragments")
 
 
@@ -282,9 +282,9 @@ def _interpenetrating():
     return _stack((v, f), (v + [1.2, 0, 0], f))
 
 
-def test_interpenetrating_parts_take_the_proxy():
+def test_interpenetrating_parts_in_the_proxy():
     mesh = clean_mesh(*_interpenetrating())
-    proxy = repair_mesh(mesh)
+    proxy = repair_mesh(mesh, "proxy")
     assert proxy.route == "proxy" and _has(proxy, "proxy of its outer surface")
     assert _one_closed_manifold(proxy)
     assert len(proxy.faces) <= repair.PROXY_FACES
@@ -295,13 +295,13 @@ def test_interpenetrating_parts_take_the_proxy():
     low, high = proxy.vertices.min(axis=0), proxy.vertices.max(axis=0)
     assert np.all(low <= [-1, -1, -1]) and np.all(low > np.array([-1, -1, -1]) - grown)
     assert np.all(high >= [2.2, 1, 1]) and np.all(high < np.array([2.2, 1, 1]) + grown)
-    sig = compute_signature(mesh, Params(descriptor="cf"))
+    sig = compute_signature(mesh, Params(descriptor="cf", repair="proxy"))
     assert sig.route == "proxy" and sig.n_components == 1 and np.isfinite(sig.vector).all()
 
 
-def test_disjoint_parts_take_the_proxy_which_keeps_the_largest():
+def test_the_proxy_of_disjoint_parts_keeps_the_largest():
     v, f = SPHERE
-    proxy = repair_mesh(clean_mesh(*_stack((v, f), (0.5 * v + [5.0, 0, 0], f))))
+    proxy = repair_mesh(clean_mesh(*_stack((v, f), (0.5 * v + [5.0, 0, 0], f))), "proxy")
     assert proxy.route == "proxy" and _one_closed_manifold(proxy)
     assert len(proxy.faces) <= repair.PROXY_FACES
     assert _has(proxy, "largest of 2 parts")

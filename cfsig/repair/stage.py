@@ -7,9 +7,12 @@ always welds, drops duplicates and degenerate faces and splits non-manifold vert
 numerics, and chooses one of three routes (docs/method.md, section 1b):
 
 - ``clean``: the mesh is one closed manifold; it passes unchanged, bit for bit.
-- ``repaired``: local repairs make it one: parts whose boundaries nearly meet are stitched,
-  small open fragments (fins, stray triangles) and parts enclosed by another part are dropped,
-  holes are closed by fans. The rest of the surface is kept exactly.
+- ``repaired``: local repairs make it closed manifold parts, for any amount of damage: fins,
+  dangling sheets and inner walls on non-manifold edges are dropped, T-junctions split, parts
+  whose boundaries nearly meet stitched, small open fragments dropped, holes closed by fans,
+  parts oriented, parts enclosed by another dropped and parts crossing another joined by their
+  union (`cfsig.repair.local`); closed parts apart are kept. The rest of the surface is kept
+  exactly.
 - ``proxy``: otherwise, the outer surface is rebuilt: the iso-surface, slightly outside the
   input, of its signed distance with the sign of the generalized winding number (libigl's
   ``offset_surface``), on a grid of a fixed number of cells along the longest side of the
@@ -25,11 +28,18 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from cfsig.errors import MeshError
+from cfsig.errors import MeshError, StageLimitError
 from cfsig.files.elements import Edges, edge_lengths, face_areas, mesh_edges
 from cfsig.files.mesh import Mesh, clean_mesh
 from cfsig.isolate import Limits, run_limited
 from cfsig.params import REPAIR_MODES
+from cfsig.repair.local import (
+    closed_parts,
+    drop_dangling,
+    orient_parts,
+    split_t_junctions,
+    weld_copies,
+)
 from cfsig.repair.simplify import decimate
 
 # Boundary vertices of different parts closer than this fraction of the bounding-box diagonal
@@ -40,7 +50,9 @@ OVERLAP_DISTANCE = 0.002
 # Open parts with less than this fraction of the total area are fragments, dropped.
 FRAGMENT_AREA = 0.01
 # Local repairs are tried on at most this many parts; beyond, the proxy is built directly.
-MAX_PARTS = 64
+MAX_PARTS = 256
+# A boundary vertex this close to a boundary edge (fraction of the diagonal) splits it.
+T_JUNCTION = 1e-4
 # The proxy's grid: cells along the bounding box's longest side, and the offset of its
 # iso-surface outside the input, in cells.
 PROXY_CELLS = 64
@@ -82,42 +94,82 @@ def repair_mesh(mesh: Mesh, mode: str = "auto", limits: Limits | None = None) ->
         return replace(mesh, parts=labels)
     if mode == "off":
         return replace(mesh, route="unrepaired")
-    if mode == "auto" and n_parts <= MAX_PARTS:
-        repaired = _local_repairs(mesh, labels)
+    if mode == "auto":
+        repaired = _local_repairs(mesh, limits or Limits())
         if repaired is not None:
             return repaired
     return proxy_mesh(mesh, limits or Limits())
 
 
-def _local_repairs(mesh: Mesh, labels: np.ndarray) -> Mesh | None:
-    """Trim overlaps, stitch, drop fragments, fill holes, drop enclosed parts.
+def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
+    """Resolve non-manifold edges, trim overlaps, stitch, drop fragments, fill holes, orient,
+    drop inner parts and join crossing ones (docs/method.md, section 1b).
 
-    Returns None unless the result is one closed manifold.
+    Returns None unless the result is closed and at most one of its parts needed its holes
+    filled: parts that were closed as read are parts of the object, but several open pieces
+    left apart are one surface cut up, for the proxy.
     """
     done = list(mesh.repairs)
-    vertices, faces = mesh.vertices, mesh.faces
+    vertices, faces = weld_copies(mesh.vertices, mesh.faces)
+    faces, dangling, walls = drop_dangling(vertices, faces, FRAGMENT_AREA)
+    if dangling:
+        done.append(f"dropped {dangling} fins and dangling sheets")
+    if walls:
+        done.append(f"dropped {walls} inner walls between closed sheets")
+    vertices, faces, edges = _tidy(vertices, faces)
+    _, n_parts, labels = _face_graph(faces, len(vertices), edges)
+    if n_parts > MAX_PARTS:
+        return None
     diagonal = float(np.linalg.norm(np.ptp(vertices, axis=0)))
     faces, trimmed = trim_overlaps(vertices, faces, labels, OVERLAP_DISTANCE * diagonal)
     if trimmed:
         done.append(f"dropped {trimmed} faces lying on another part's surface")
+    vertices, faces, edges = _tidy(vertices, faces)
+    for _ in range(3):  # a face with T-junctions on two or three edges is split edge by edge
+        faces, split = split_t_junctions(vertices, faces, edges, T_JUNCTION * diagonal)
+        if not split:
+            break
+        done.append(f"split boundary edges at {split} T-junctions")
+        # The seam's corners were split apart as non-manifold while it was open: weld them.
+        vertices, faces, edges = _tidy(*weld_copies(vertices, faces))
     # Each step gets the faces cleaned after the one before, with the edges of that cleaning.
-    vertices, faces, stitched = stitch(*_tidy(vertices, faces), STITCH_DISTANCE * diagonal)
+    vertices, faces, stitched = stitch(vertices, faces, edges, STITCH_DISTANCE * diagonal)
     if stitched:
         done.append(f"stitched {stitched} pairs of boundary vertices between parts")
     vertices, faces, dropped = drop_fragments(*_tidy(vertices, faces), FRAGMENT_AREA)
     if dropped:
         done.append(f"dropped {dropped} small open fragments")
-    vertices, faces, filled = fill_holes(*_tidy(vertices, faces))
+    vertices, faces, edges = _tidy(vertices, faces)
+    if _open_parts(faces, len(vertices), edges) > 1:
+        return None
+    vertices, faces, filled = fill_holes(vertices, faces, edges)
     if filled:
         done.append(f"closed {filled} holes")
-    vertices, faces, enclosed = drop_enclosed(*_tidy(vertices, faces))
+    vertices, faces, edges = _tidy(vertices, faces)
+    faces = orient_parts(vertices, faces)
+    labels = _face_graph(faces, len(vertices), edges)[2]
+    try:
+        vertices, faces, enclosed, joined = closed_parts(vertices, faces, labels, limits)
+    except StageLimitError:
+        return None
     if enclosed:
         done.append(f"dropped {enclosed} parts enclosed by another")
+    if joined:
+        done.append(f"joined {joined} crossing parts to others by their union")
     result = clean_mesh(vertices, faces, weld=False)
-    n_parts, _, closed = _surface(result)
-    if n_parts != 1 or not closed:
+    n_parts, labels, closed = _surface(result)
+    if not closed:
         return None
-    return replace(result, repairs=tuple(done), route="repaired")
+    if n_parts > 1:
+        done.append(f"kept {n_parts} closed parts")
+    return replace(result, repairs=tuple(done), route="repaired", parts=labels)
+
+
+def _open_parts(faces: np.ndarray, n_vertices: int, edges: Edges | None) -> int:
+    """The number of parts with an edge of one face."""
+    edges, n_parts, labels = _face_graph(faces, n_vertices, edges)
+    boundary = edges.ends[np.diff(edges.starts) == 1, 0]
+    return len(np.unique(labels[boundary]))
 
 
 def _tidy(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, Edges | None]:
@@ -132,8 +184,9 @@ def trim_overlaps(
 ) -> tuple[np.ndarray, int]:
     """Drop the faces of a part that lie on the surface of a larger part (a surface covered twice).
 
-    Parts are taken from the largest; a face whose three vertices all lie within ``distance``
-    of the faces kept so far is dropped.
+    Parts are taken from the largest; a face of an open part whose three vertices all lie
+    within ``distance`` of the faces kept so far is dropped. A closed part is dropped only
+    whole (a copy), else kept whole (a part of the object).
 
     Parameters
     ----------
@@ -160,16 +213,31 @@ def trim_overlaps(
     if n_parts < 2:
         return faces, 0
     area = _part_areas(vertices, faces, face_part, n_parts)
+    edges = mesh_edges(faces, len(vertices))
+    closed = np.ones(n_parts, dtype=bool)
+    closed[labels[edges.ends[np.diff(edges.starts) == 1, 0]]] = False
     keep = np.zeros(len(faces), dtype=bool)
     order = np.argsort(-area, kind="stable")
     keep[face_part == order[0]] = True
+    corners_of = vertices[faces]
+    face_low, face_high = corners_of.min(axis=1), corners_of.max(axis=1)
     for part in order[1:]:
         mine = np.flatnonzero(face_part == part)
         corners = np.unique(faces[mine])
-        squared = igl.point_mesh_squared_distance(vertices[corners], vertices, faces[keep])[0]
+        # Only the kept faces near the part's bounding box: one small search tree per part.
+        low = vertices[corners].min(axis=0) - distance
+        high = vertices[corners].max(axis=0) + distance
+        nearby = keep & np.all(face_low <= high, axis=1) & np.all(face_high >= low, axis=1)
+        if not nearby.any():
+            keep[mine] = True
+            continue
+        squared = igl.point_mesh_squared_distance(vertices[corners], vertices, faces[nearby])[0]
         near = np.zeros(len(vertices), dtype=bool)
         near[corners] = squared <= distance**2
-        keep[mine[~near[faces[mine]].all(axis=1)]] = True
+        lying = near[faces[mine]].all(axis=1)
+        if closed[part] and not lying.all():
+            lying[:] = False  # a closed part is a part of the object, or a copy dropped whole
+        keep[mine[~lying]] = True
     return faces[keep], int(len(faces) - keep.sum())
 
 
@@ -395,56 +463,6 @@ def boundary_loops(edges: Edges, n_vertices: int) -> list[np.ndarray]:
         if len(loop) >= 3:
             loops.append(np.array(loop, dtype=np.int64))
     return loops
-
-
-def drop_enclosed(
-    vertices: np.ndarray, faces: np.ndarray, edges: Edges | None = None
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """Drop closed parts that lie inside another part (hidden inner geometry).
-
-    A part is inside when the generalized winding number of another part, oriented
-    consistently in itself, is above one half in magnitude at most of its vertices.
-
-    Parameters
-    ----------
-    vertices : (n, 3) float64
-        Vertex positions.
-    faces : (m, 3) int64
-        Triangles.
-    edges : geometry.Edges or None
-        The faces' `cfsig.files.elements.mesh_edges` when already known (`clean_mesh` keeps them).
-
-    Returns
-    -------
-    vertices : (n, 3) float64
-        Unchanged.
-    faces : (m', 3) int64
-        The faces kept.
-    dropped : int
-        Number of parts dropped.
-    """
-    import igl
-
-    _, n_parts, labels = _face_graph(faces, len(vertices), edges)
-    if n_parts < 2:
-        return vertices, faces, 0
-    oriented, _ = igl.bfs_orient(faces)
-    face_part = labels[faces[:, 0]]
-    rng = np.random.default_rng(0)
-    enclosed = np.zeros(n_parts, dtype=bool)
-    for part in range(n_parts):
-        members = np.flatnonzero(labels == part)
-        probes = vertices[rng.choice(members, size=min(16, len(members)), replace=False)]
-        # Part by part: each is oriented in itself only, so the others' numbers may cancel.
-        for other in np.flatnonzero(~enclosed):
-            if other != part:
-                winding = igl.winding_number(vertices, oriented[face_part == other], probes)
-                if np.median(np.abs(winding)) > 0.5:
-                    enclosed[part] = True
-                    break
-    if not enclosed.any():
-        return vertices, faces, 0
-    return vertices, faces[~enclosed[face_part]], int(enclosed.sum())
 
 
 def proxy_mesh(mesh: Mesh, limits: Limits) -> Mesh:

@@ -1,0 +1,356 @@
+"""Local repairs that hold for any amount of damage: the steps of the ``repaired`` route that
+work on the whole mesh at once rather than part by part (`cfsig.repair.stage`).
+
+- `weld_copies`: the mesh as it was before reading split its non-manifold vertices, so that
+  a fin's edge is one edge of three faces again.
+- `drop_dangling`: fins and dangling open sheets on edges of three or more faces go; of the
+  closed sheets meeting on an edge an odd number of times, the smallest goes until the
+  surface closes.
+- `split_t_junctions`: the two sides of a seam meshed independently are stitched by splitting
+  each boundary edge at the other side's vertices lying on it.
+- `orient_parts`: every part oriented consistently and outward.
+- `closed_parts`: closed parts inside another are dropped (generalized winding number), parts
+  crossing another are joined by an exact union (manifold3d), and parts apart stay parts.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from cfsig.errors import StageLimitError
+from cfsig.files.elements import Edges, edge_lengths, face_areas, mesh_edges
+from cfsig.isolate import Limits, run_limited
+
+# Rounds of `drop_dangling`: each drops what the one before uncovered.
+MAX_ROUNDS = 32
+# A closed part is inside another when at least this share of its probe vertices is.
+ENCLOSED_SHARE = 0.9
+# Vertices of a part probed against the others' winding numbers.
+PROBES = 64
+
+
+def weld_copies(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Merge vertices at exactly the same position: the copies `clean_mesh` made of each
+    non-manifold vertex, since reading already merged every other coincident pair.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        Vertex positions.
+    faces : (m, 3) int64
+        Triangles.
+
+    Returns
+    -------
+    vertices : (n, 3) float64
+        Unchanged; the copies are left unreferenced, for `clean_mesh` to remove, so that the
+        vertices keep their order.
+    faces : (m, 3) int64
+        The triangles on the first vertex at each position.
+    """
+    unique, first, inverse = np.unique(
+        vertices + 0.0, axis=0, return_index=True, return_inverse=True
+    )
+    if len(unique) == len(vertices):
+        return vertices, faces
+    return vertices, first[inverse.reshape(-1)][faces]
+
+
+def drop_dangling(
+    vertices: np.ndarray, faces: np.ndarray, fraction: float
+) -> tuple[np.ndarray, int, int]:
+    """Resolve the edges of three or more faces by keeping the sheets that close the surface.
+
+    A sheet is a maximal set of faces joined through edges of exactly two faces. Round after
+    round: open sheets (with an edge of one face) that touch an edge of three or more faces and
+    hold less than ``fraction`` of the area go (fins, dangling faces); when none is left, of the
+    sheets bounded only by edges of an odd number of faces (three or more), the smallest goes
+    (an inner wall between two closed parts). Dropping a fin makes its edge one of two faces
+    again, which joins the sheets on either side in the next round.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        Vertex positions.
+    faces : (m, 3) int64
+        Triangles, duplicates dropped.
+    fraction : float
+        Area fraction below which an open sheet on an edge of three or more faces is dropped.
+
+    Returns
+    -------
+    faces : (m', 3) int64
+        The faces kept (unreferenced vertices are left for `clean_mesh`).
+    dangling : int
+        Number of dangling sheets dropped.
+    walls : int
+        Number of inner walls dropped.
+    """
+    area = face_areas(edge_lengths(vertices, faces))
+    dangling = walls = 0
+    for _ in range(MAX_ROUNDS):
+        edges = mesh_edges(faces, len(vertices))
+        counts = np.diff(edges.starts)
+        if not np.any(counts > 2):
+            break
+        face_counts = np.empty(3 * len(faces), dtype=np.int64)
+        face_counts[edges.order] = np.repeat(counts, counts)
+        per_face = face_counts.reshape(-1, 3)
+        n_sheets, sheet = _sheets(edges, counts, len(faces))
+        sheet_area = np.bincount(sheet, area, n_sheets)
+        is_open = np.bincount(sheet, (per_face == 1).any(axis=1), n_sheets) > 0
+        touches = np.bincount(sheet, (per_face > 2).any(axis=1), n_sheets) > 0
+        drop = is_open & touches & (sheet_area < fraction * sheet_area.sum())
+        if drop.any():
+            dangling += int(drop.sum())
+        else:
+            border = (per_face != 2).any(axis=1)
+            even = np.bincount(sheet, ((per_face > 2) & (per_face % 2 == 0)).any(axis=1), n_sheets)
+            wall = (np.bincount(sheet, border, n_sheets) > 0) & ~is_open & (even == 0)
+            if wall.sum() < 2:
+                break
+            drop = np.zeros(n_sheets, dtype=bool)
+            drop[np.flatnonzero(wall)[np.argmin(sheet_area[wall])]] = True
+            walls += 1
+        keep = ~drop[sheet]
+        faces, area = faces[keep], area[keep]
+    return faces, dangling, walls
+
+
+def _sheets(edges: Edges, counts: np.ndarray, n_faces: int) -> tuple[int, np.ndarray]:
+    """Faces joined through edges of exactly two faces: the number of sheets, each face's."""
+    pair = edges.starts[:-1][counts == 2]
+    a, b = edges.order[pair] // 3, edges.order[pair + 1] // 3
+    graph = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(n_faces, n_faces))
+    count, labels = connected_components(graph, directed=False)
+    return int(count), labels
+
+
+def split_t_junctions(
+    vertices: np.ndarray, faces: np.ndarray, edges: Edges | None, tolerance: float
+) -> tuple[np.ndarray, int]:
+    """Split boundary edges at the boundary vertices lying on them (T-junctions).
+
+    Where the two sides of a seam were meshed independently, a vertex of one side lies inside
+    an edge of the other, and the seam stays open however close its sides are. Each boundary
+    edge gets the boundary vertices within ``tolerance`` of its inside (each vertex on its
+    nearest such edge); its face is split into a fan through them, in order along the edge,
+    so that the seam's two sides share their vertices.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        Vertex positions.
+    faces : (m, 3) int64
+        Triangles with at most two faces per edge (`clean_mesh`).
+    edges : geometry.Edges or None
+        The faces' `cfsig.files.elements.mesh_edges` when already known.
+    tolerance : float
+        Largest distance of a vertex to an edge it splits, in length units.
+
+    Returns
+    -------
+    faces : (m', 3) int64
+        With each split face replaced by its fan.
+    split : int
+        Number of vertices inserted into edges.
+    """
+    if edges is None:
+        edges = mesh_edges(faces, len(vertices))
+    counts = np.diff(edges.starts)
+    half = edges.order[edges.starts[:-1][counts == 1]]
+    if len(half) < 2:
+        return faces, 0
+    from scipy.spatial import cKDTree  # here: a tenth of a second to import, for a rare repair
+
+    face, corner = half // 3, half % 3
+    a, b = faces[face, corner], faces[face, (corner + 1) % 3]
+    start, direction = vertices[a], vertices[b] - vertices[a]
+    length = np.linalg.norm(direction, axis=1)
+    points = np.unique(np.r_[a, b])
+    tree = cKDTree((start + vertices[b]) / 2)
+    near = tree.query_ball_point(vertices[points], float(length.max()) / 2 + tolerance)
+    sizes = np.fromiter(map(len, near), dtype=np.int64, count=len(near))
+    point = np.repeat(points, sizes)
+    edge = np.fromiter((e for row in near for e in row), dtype=np.int64, count=int(sizes.sum()))
+    along = np.einsum("ij,ij->i", vertices[point] - start[edge], direction[edge])
+    t = along / np.maximum(length[edge] ** 2, np.finfo(float).tiny)
+    gap = np.linalg.norm(start[edge] + t[:, None] * direction[edge] - vertices[point], axis=1)
+    margin = tolerance / np.maximum(length[edge], np.finfo(float).tiny)
+    on = (gap <= tolerance) & (t > margin) & (t < 1 - margin)
+    on &= (point != a[edge]) & (point != b[edge])
+    point, edge, t, gap = point[on], edge[on], t[on], gap[on]
+    if len(point) == 0:
+        return faces, 0
+    nearest = np.lexsort((gap, point))
+    first = np.r_[True, point[nearest][1:] != point[nearest][:-1]]
+    point, edge, t = point[nearest][first], edge[nearest][first], t[nearest][first]
+    # One edge per face: a face with two split edges gets its second in the next call.
+    _, one = np.unique(face[edge], return_index=True)
+    chosen = np.isin(edge, edge[one])
+    point, edge, t = point[chosen], edge[chosen], t[chosen]
+    order = np.lexsort((t, edge))
+    point, edge = point[order], edge[order]
+    fans = []
+    for e in np.unique(edge):
+        inside = point[edge == e]
+        chain = np.r_[a[e], inside, b[e]]
+        apex = faces[face[e], (corner[e] + 2) % 3]
+        fans.append(np.column_stack([chain[:-1], chain[1:], np.full(len(chain) - 1, apex)]))
+    keep = np.ones(len(faces), dtype=bool)
+    keep[face[np.unique(edge)]] = False
+    return np.vstack([faces[keep], *fans]), len(point)
+
+
+def orient_parts(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Orient every part consistently in itself, and outward: its signed volume positive.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        Vertex positions.
+    faces : (m, 3) int64
+        Triangles with at most two faces per edge and one fan per vertex.
+
+    Returns
+    -------
+    faces : (m, 3) int64
+        The same triangles, some reversed.
+    """
+    import igl
+
+    oriented, part = igl.bfs_orient(faces)
+    oriented, part = np.asarray(oriented, dtype=np.int64), np.asarray(part).ravel()
+    corners = vertices[oriented]
+    volume = np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2]))
+    inward = np.bincount(part, volume) < 0
+    flip = inward[part]
+    oriented[flip] = oriented[flip][:, ::-1]
+    return oriented
+
+
+def closed_parts(
+    vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, limits: Limits
+) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """Drop the closed parts inside another, join the parts that cross each other.
+
+    A part's probe vertices (up to `PROBES`) are tested against the generalized winding number
+    (libigl's fast winding number) of every other part whose bounding box meets its own: when
+    at least `ENCLOSED_SHARE` of them are inside, the part is hidden inner geometry and is
+    dropped; when some are, the two cross. Parts that cross are joined by manifold3d's exact
+    union, in a child process under ``limits``; parts apart stay as they are, each a part of
+    the object (buttons, wheels).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        Vertex positions.
+    faces : (m, 3) int64
+        Closed triangles, every part oriented outward (`orient_parts`).
+    labels : (n,) int
+        Part of each vertex.
+    limits : Limits
+        Time and memory allowed to the union.
+
+    Returns
+    -------
+    vertices : (n', 3) float64
+        With the unions' vertices appended.
+    faces : (m', 3) int64
+        The faces kept and the unions'.
+    enclosed : int
+        Number of parts dropped.
+    joined : int
+        Number of parts joined into others.
+
+    Raises
+    ------
+    StageLimitError
+        The union failed or exceeded its limits.
+    """
+    import igl
+
+    n_parts = int(labels.max()) + 1
+    if n_parts < 2:
+        return vertices, faces, 0, 0
+    face_part = labels[faces[:, 0]]
+    low = np.full((n_parts, 3), np.inf)
+    high = np.full((n_parts, 3), -np.inf)
+    np.minimum.at(low, labels, vertices)
+    np.maximum.at(high, labels, vertices)
+    meet = np.all(low[:, None] <= high[None], axis=2) & np.all(low[None] <= high[:, None], axis=2)
+    np.fill_diagonal(meet, False)
+    area = np.bincount(face_part, face_areas(edge_lengths(vertices, faces)), n_parts)
+    rng = np.random.default_rng(0)
+    probes = np.concatenate(
+        [rng.permutation(np.flatnonzero(labels == part))[:PROBES] for part in range(n_parts)]
+    )
+    probe_part = labels[probes]
+    per_part = np.bincount(probe_part, minlength=n_parts)
+    # share[p, q]: the share of p's probes inside q, by q's fast winding number (one tree per q).
+    share = np.zeros((n_parts, n_parts))
+    for other in np.flatnonzero(meet.any(axis=0)):
+        tested = meet[probe_part, other]
+        winding = igl.fast_winding_number(
+            vertices, faces[face_part == other], vertices[probes[tested]]
+        )
+        inside = np.bincount(probe_part[tested], np.abs(winding) > 0.5, n_parts)
+        share[:, other] = inside / per_part
+    enclosed = np.zeros(n_parts, dtype=bool)
+    for part in np.argsort(area, kind="stable"):  # the smallest first: the likeliest inside
+        enclosed[part] = np.any(share[part, ~enclosed] >= ENCLOSED_SHARE)
+    crossing = [(p, q) for p, q in zip(*np.nonzero((share > 0) | (share.T > 0)), strict=True)]
+    kept = ~enclosed
+    pairs = [(p, q) for p, q in crossing if kept[p] and kept[q]]
+    if not pairs:
+        return vertices, faces[kept[face_part]], int(enclosed.sum()), 0
+    p, q = np.array(pairs).T
+    graph = sp.coo_matrix((np.ones(len(p)), (p, q)), shape=(n_parts, n_parts))
+    _, group = connected_components(graph, directed=False)
+    sizes = np.bincount(group[kept], minlength=n_parts)
+    joined_groups = [g for g in np.unique(group[kept]) if sizes[g] > 1]
+    pieces = [(faces[face_part == part]) for part in range(n_parts)]
+    union_parts = [
+        [(vertices, pieces[part]) for part in np.flatnonzero(kept & (group == g))]
+        for g in joined_groups
+    ]
+    unions = run_limited(_unions, (union_parts,), limits, "the union of crossing parts")
+    joined = kept & np.isin(group, joined_groups)
+    new_vertices, new_faces, count = [vertices], [faces[(kept & ~joined)[face_part]]], len(vertices)
+    for union_vertices, union_faces in unions:
+        new_vertices.append(union_vertices)
+        new_faces.append(union_faces + count)
+        count += len(union_vertices)
+    n_joined = int(joined.sum()) - len(joined_groups)
+    return np.vstack(new_vertices), np.vstack(new_faces), int(enclosed.sum()), n_joined
+
+
+def _unions(
+    groups: list[list[tuple[np.ndarray, np.ndarray]]],
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """manifold3d's exact union of each group of closed, outward-oriented parts."""
+    import manifold3d
+
+    results = []
+    for group in groups:
+        solids = []
+        for vertices, faces in group:
+            used, inverse = np.unique(faces, return_inverse=True)
+            mesh = manifold3d.Mesh64(
+                np.ascontiguousarray(vertices[used]),
+                np.ascontiguousarray(inverse.reshape(-1, 3), dtype=np.uint64),
+            )
+            solid = manifold3d.Manifold(mesh)
+            if solid.status() != manifold3d.Error.NoError:
+                raise StageLimitError(f"a part is not a closed manifold: {solid.status()}")
+            solids.append(solid)
+        union = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add).to_mesh64()
+        if len(union.tri_verts) == 0:
+            raise StageLimitError("the union of crossing parts came out empty")
+        results.append(
+            (np.asarray(union.vert_properties[:, :3], dtype=np.float64),
+             np.asarray(union.tri_verts, dtype=np.int64))
+        )  # fmt: skip
+    return results
