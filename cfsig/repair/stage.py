@@ -25,12 +25,11 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from cfsig.errors import MeshError
 from cfsig.files.elements import Edges, edge_lengths, face_areas, mesh_edges
 from cfsig.files.mesh import Mesh, clean_mesh
-from cfsig.isolate import Limits, run_limited
+from cfsig.isolate import Limits
 from cfsig.params import REPAIR_MODES
-from cfsig.repair.simplify import decimate
+from cfsig.repair.proxy import proxy_mesh
 
 # Boundary vertices of different parts closer than this fraction of the bounding-box diagonal
 # are stitched together.
@@ -41,12 +40,6 @@ OVERLAP_DISTANCE = 0.002
 FRAGMENT_AREA = 0.01
 # Local repairs are tried on at most this many parts; beyond, the proxy is built directly.
 MAX_PARTS = 64
-# The proxy's grid: cells along the bounding box's longest side, and the offset of its
-# iso-surface outside the input, in cells.
-PROXY_CELLS = 64
-PROXY_OFFSET = 2.0
-# Marching cubes gives more faces the larger the surface; the proxy is simplified to this many.
-PROXY_FACES = 8000
 
 
 def repair_mesh(mesh: Mesh, mode: str = "auto", limits: Limits | None = None) -> Mesh:
@@ -445,75 +438,6 @@ def drop_enclosed(
     if not enclosed.any():
         return vertices, faces, 0
     return vertices, faces[~enclosed[face_part]], int(enclosed.sum())
-
-
-def proxy_mesh(mesh: Mesh, limits: Limits) -> Mesh:
-    """The proxy route: the outer surface rebuilt on a grid, in a child process.
-
-    Parameters
-    ----------
-    mesh : Mesh
-        A checked mesh.
-    limits : Limits
-        Time and memory allowed to the remesh.
-
-    Returns
-    -------
-    mesh : Mesh
-        The proxy's largest part by area, checked, with ``route="proxy"``: parts further apart
-        than the offset stay apart on the grid, and each would get its own unrelated
-        distribution of phi (the paper's drawback this stage exists for).
-
-    Raises
-    ------
-    MeshError
-        The proxy came out empty; `StageLimitError` past the limits.
-    """
-    vertices, faces = run_limited(
-        offset_surface, (mesh.vertices, mesh.faces), limits, "the proxy remesh"
-    )
-    if len(faces) == 0:
-        raise MeshError("the proxy surface is empty (a flat or degenerate model)")
-    proxy = clean_mesh(vertices, faces)
-    n_parts, labels, _ = _surface(proxy)
-    note = f"replaced by a proxy of its outer surface ({len(proxy.faces)} faces)"
-    if n_parts > 1:
-        face_part = labels[proxy.faces[:, 0]]
-        largest = np.argmax(_part_areas(proxy.vertices, proxy.faces, face_part, n_parts))
-        proxy = clean_mesh(proxy.vertices, proxy.faces[face_part == largest], weld=False)
-        note = f"replaced by a proxy of its outer surface, its largest of {n_parts} parts "
-        note += f"({len(proxy.faces)} faces)"
-    return replace(proxy, repairs=(*mesh.repairs, note), route="proxy")
-
-
-def offset_surface(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The iso-surface just outside a triangle soup, on a grid of `PROXY_CELLS` cells.
-
-    Simplified by quadric edge collapses (fast-simplification) to `PROXY_FACES` faces.
-
-    Parameters
-    ----------
-    vertices : (n, 3) float64
-        Vertex positions.
-    faces : (m, 3) int64
-        Triangles, in any orientation.
-
-    Returns
-    -------
-    vertices : (p, 3) float64
-        The iso-surface's vertices.
-    faces : (q, 3) int64
-        Its triangles (marching cubes: closed and manifold).
-    """
-    import igl
-
-    cell = float(np.ptp(vertices, axis=0).max()) / PROXY_CELLS
-    oriented, _ = igl.bfs_orient(faces)
-    result = igl.offset_surface(
-        vertices, oriented, PROXY_OFFSET * cell, PROXY_CELLS,
-        igl.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER,
-    )  # fmt: skip
-    return decimate(result[0], result[1], PROXY_FACES)
 
 
 def _part_areas(
