@@ -149,8 +149,8 @@ def test_components_reported(tmp_path):
     path = tmp_path / "two.off"
     path.write_text(off_text(np.vstack([v1, v1 + 3]), np.vstack([f1, f1 + len(v1)])))
     assert "2 component(s)" in _compute(path, "--repair", "off").output  # solved as read
-    # by default the two spheres are rebuilt as one proxy, its largest part kept
-    assert "1 component(s)" in _compute(path).output and ", proxy" in _compute(path).output
+    # by default the two spheres go to the proxy, which keeps both
+    assert "2 component(s)" in _compute(path).output and ", proxy" in _compute(path).output
 
 
 def test_evaluate_keeps_going_past_bad_files(tmp_path):
