@@ -32,8 +32,9 @@ MAX_SURFACE_CELLS = 10_000
 # The iso-surface lies this many cells outside open parts (a sheet becomes a slab), on the
 # surface of closed ones.
 SHEET_OFFSET = 0.5
-# Marching cubes gives more faces the larger the surface; the proxy is simplified to this many.
-PROXY_FACES = 8000
+# Marching cubes gives about 2.5 faces per surface cell; a proxy with more than this many (a
+# bulky shape at `MIN_CELLS`) is simplified to it. Simplifying further splits thin parts.
+PROXY_FACES = 40_000
 # Points whose inward balls measure the thickness.
 THICKNESS_SAMPLES = 300
 # Cells along each side of the coarse grid that counts the parts' bounding boxes.
@@ -74,7 +75,7 @@ def proxy_mesh(mesh: Mesh, limits: Limits) -> Mesh:
 
 
 def proxy_surface(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The closed surface around a triangle soup, its thin parts kept, simplified.
+    """The closed surface around a triangle soup, its thin parts kept.
 
     Parameters
     ----------
@@ -88,8 +89,8 @@ def proxy_surface(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     vertices : (p, 3) float64
         The surface's vertices.
     faces : (q, 3) int64
-        Its triangles, at most about `PROXY_FACES`: the parts of the iso-surface that enclose
-        volume (inner walls of cavities dropped), simplified by quadric edge collapses.
+        Its triangles: the parts of the iso-surface that enclose volume (inner walls of
+        cavities dropped), simplified by quadric edge collapses beyond `PROXY_FACES`.
     """
     import igl
 
