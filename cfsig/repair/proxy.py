@@ -153,7 +153,7 @@ def signed_distance(
     mine = part[np.maximum(nearest, 0)]
     exact = ~far & ~open_part[mine]
     if n_parts > 1:
-        covering, own = _boxes_covering(points, vertices, faces, mine)
+        covering, own = _boxes_covering(points, vertices, labels, n_parts, mine)
         exact &= (covering == 0) | ((covering == 1) & own)
     distance = np.where(far, bound, np.abs(signed))
     if not exact.all():
@@ -164,7 +164,7 @@ def signed_distance(
 
 
 def _boxes_covering(
-    points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, mine: np.ndarray
+    points: np.ndarray, vertices: np.ndarray, labels: np.ndarray, n_parts: int, mine: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """How many parts' bounding boxes may hold each point, and whether its own part's does.
 
@@ -177,10 +177,12 @@ def _boxes_covering(
         Query points.
     vertices : (n, 3) float64
         Vertex positions.
-    faces : (m, 3) int64
-        Triangles.
+    labels : (n,) int
+        The part of each vertex, from 0 to ``n_parts - 1``.
+    n_parts : int
+        Number of parts.
     mine : (p,) int
-        The part of each point's nearest face, numbered as `components` numbers them.
+        The part of each point's nearest face.
 
     Returns
     -------
@@ -189,7 +191,6 @@ def _boxes_covering(
     own : (p,) bool
         Whether the grown box of its own part does.
     """
-    n_parts, labels = components(edge_graph(faces, len(vertices)))
     low, high = vertices.min(axis=0), vertices.max(axis=0)
     size = np.maximum(high - low, 1e-300) / BOX_CELLS
     first = np.full((n_parts, 3), BOX_CELLS - 1, dtype=np.int64)

@@ -10,11 +10,8 @@ numerics, and chooses one of three routes (docs/method.md, section 1b):
 - ``repaired``: local repairs make it one: parts whose boundaries nearly meet are stitched,
   small open fragments (fins, stray triangles) and parts enclosed by another part are dropped,
   holes are closed by fans. The rest of the surface is kept exactly.
-- ``proxy``: otherwise, the outer surface is rebuilt: the iso-surface, slightly outside the
-  input, of its signed distance with the sign of the generalized winding number (libigl's
-  ``offset_surface``), on a grid of a fixed number of cells along the longest side of the
-  bounding box, so that its resolution follows the shape and not the input's tessellation. It
-  runs in a child process under a time and memory limit (`cfsig.isolate`).
+- ``proxy``: otherwise, the surface is rebuilt on a grid whose cells follow the thinnest
+  parts (`cfsig.repair.proxy`), in a child process under a time and memory limit.
 """
 
 from __future__ import annotations
