@@ -93,3 +93,12 @@ def test_a_hidden_inner_part_leaves_no_cavity():
 def _stack_spheres(v, f):
     """A unit sphere with a smaller one inside it, facing inward (a cavity's orientation)."""
     return np.vstack([v, 0.3 * v]), np.vstack([f, f[:, ::-1] + len(v)])
+
+
+def test_a_holed_shell_is_closed_over_its_hole():
+    v, f = icosphere(3)
+    cap = (v[f][:, :, 2] > 0.7).all(axis=1)  # a hole of a fifth of the radius, not a sheet
+    proxy = proxy_mesh(clean_mesh(v, f[~cap]), Limits())
+    count, _ = components(edge_graph(proxy.faces, len(proxy.vertices)))
+    assert count == 1 and _closed(proxy)
+    assert _inside(proxy, np.array([[0.0, 0, 0], [0, 0, 0.6]])).all()  # filled, hole spanned

@@ -105,6 +105,12 @@ def proxy_surface(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     )
     distance = signed_distance(points, vertices, oriented, 4 * cell, SHEET_OFFSET * cell)
     surface, triangles, _ = igl.marching_cubes(distance, points, corners, 0.0)
+    # Across a hole the winding number's level set leaves the cells near the surface: its rim
+    # is closed by a fan, as the local repairs close holes.
+    from cfsig.repair.stage import fill_holes
+
+    surface, triangles, _ = fill_holes(surface, triangles)
+    triangles = igl.bfs_orient(triangles)[0]  # the fans as marching cubes faces (first)
     surface, triangles = enclosing_parts(surface, triangles)
     return decimate(surface, triangles, PROXY_FACES)
 
