@@ -105,12 +105,7 @@ def proxy_surface(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     )
     distance = signed_distance(points, vertices, oriented, 4 * cell, SHEET_OFFSET * cell)
     surface, triangles, _ = igl.marching_cubes(distance, points, corners, 0.0)
-    # Across a hole the winding number's level set leaves the cells near the surface: its rim
-    # is closed by a fan, as the local repairs close holes.
-    from cfsig.repair.stage import fill_holes
-
-    surface, triangles, _ = fill_holes(surface, triangles)
-    triangles = igl.bfs_orient(triangles)[0]  # the fans as marching cubes faces (first)
+    surface, triangles = close_rims(surface, triangles)
     surface, triangles = enclosing_parts(surface, triangles)
     return decimate(surface, triangles, PROXY_FACES)
 
@@ -442,6 +437,45 @@ def surface_points(vertices: np.ndarray, faces: np.ndarray, spacing: float) -> n
         lattice = base + u * (b[mine] - a[mine])[:, None] + w * (c[mine] - a[mine])[:, None]
         points.append(lattice.reshape(-1, 3))
     return np.vstack(points)
+
+
+def close_rims(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Close the rims that marching cubes leaves where the level set leaves the cells computed.
+
+    Across a hole in the input the winding number's level set spans open space, beyond the
+    cells near the surface; the rim of its part within them is closed by a fan from its
+    centroid, oriented as the faces around it.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        Vertex positions.
+    faces : (m, 3) int64
+        Consistently oriented, manifold triangles (marching cubes).
+
+    Returns
+    -------
+    vertices : (n + k, 3) float64
+        With the centroid of each of the k rims.
+    faces : (m', 3) int64
+        With the fans.
+    """
+    import igl
+
+    if len(faces) == 0:
+        return vertices, faces
+    rims = [np.asarray(rim, dtype=np.int64) for rim in igl.boundary_loop_all(faces)]
+    rims = [rim for rim in rims if len(rim) >= 3]
+    if not rims:
+        return vertices, faces
+    centres = np.array([vertices[rim].mean(axis=0) for rim in rims])
+    fans = [
+        np.column_stack([np.full(len(rim), len(vertices) + k), rim, np.roll(rim, -1)])
+        for k, rim in enumerate(rims)
+    ]
+    closed = np.vstack([faces, *fans])
+    # bfs_orient keeps each part's first face, a marching cubes face, and turns the fans to it.
+    return np.vstack([vertices, centres]), igl.bfs_orient(closed)[0]
 
 
 def enclosing_parts(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
