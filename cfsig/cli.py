@@ -210,7 +210,7 @@ def compute(
             rows.append({"file": str(path), "error": str(exc)})
             continue
         if png or ply or hist:
-            drawn.append((_short(path), mesh, sig))
+            drawn.append((path, mesh, sig))
         for repair in sig.repairs:
             click.echo(f"Warning: {path}: {repair}", err=True)
         row = _describe(path, sig)
@@ -797,12 +797,14 @@ def _compute_pictures(drawn: list, params: Params, png, ply, hist) -> None:
 
     with _writing_pictures():
         if png:
-            figures.render_phi([(mesh, sig.phi, name) for name, mesh, sig in drawn], png)
+            shown = [(path, _short(path), mesh, sig.phi, sig.route) for path, mesh, sig in drawn]
+            items, views = figures.phi_panels(shown)
+            figures.render_phi(items, png, views=views)
         if ply:
             _, mesh, sig = drawn[0]
             figures.write_ply(mesh, sig.phi, ply)
         if hist:
-            names = [name for name, _, _ in drawn]
+            names = [_short(path) for path, _, _ in drawn]
             hists = [sig.vector for _, _, sig in drawn]
             figures.plot_histograms(hists, names, params.edges, hist)
 

@@ -275,6 +275,21 @@ def test_cli_compute_pictures(tmp_path, collection):
     assert run.exit_code == 2 and "--ply writes one mesh" in run.output
 
 
+def test_cli_compute_picture_shows_the_mesh_as_read_beside_the_repaired(tmp_path):
+    v, f = icosphere(2)
+    path = write_off(
+        tmp_path / "two.off", np.vstack([v, v + [1.2, 0, 0]]), np.vstack([f, f + len(v)])
+    )
+    out = tmp_path / "p.png"
+    run = CliRunner().invoke(main, ["compute", str(path), "--png", str(out)])
+    assert run.exit_code == 0 and ", repaired" in run.output, run.output  # joined by their union
+    _, pixels = _png(out)
+    assert pixels.shape[1] == 2 * 480 + 110  # as read, then as repaired: two panels
+    as_read, repaired = (pixels[40:480, k * 480 : (k + 1) * 480, :3] for k in (0, 1))
+    colour = [float(np.ptp(p, axis=2).max()) for p in (as_read, repaired)]
+    assert colour[0] < 0.35 < colour[1]  # clay, then coloured by phi
+
+
 def test_cli_picture_write_failure_is_one_line(tmp_path, collection):
     out = tmp_path / "no" / "such" / "dir" / "p.png"
     run = CliRunner().invoke(

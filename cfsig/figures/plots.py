@@ -19,7 +19,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cfsig.errors import CfsigError
-from cfsig.figures.raster import CMAP, colormap, require_matplotlib, shade_mesh, unit_interval
+from cfsig.figures.raster import (
+    CMAP,
+    colormap,
+    default_view,
+    require_matplotlib,
+    shade_mesh,
+    unit_interval,
+)
 from cfsig.files.mesh import Mesh, read_mesh
 
 if TYPE_CHECKING:
@@ -83,10 +90,11 @@ def phi_colors(phi: np.ndarray, cmap: str = CMAP) -> np.ndarray:
 
 
 def render_phi(
-    items: Sequence[tuple[Mesh, np.ndarray, str]],
+    items: Sequence[tuple[Mesh, np.ndarray | None, str]],
     out: str | os.PathLike,
     panel: int = _PANEL,
     cmap: str = CMAP,
+    views: Sequence[np.ndarray | None] | None = None,
 ) -> None:
     """Draw meshes side by side coloured by phi, each normalised to [0, 1], with a colour bar.
 
@@ -95,14 +103,18 @@ def render_phi(
 
     Parameters
     ----------
-    items : sequence of (Mesh, (n,) float, str)
-        Each mesh, its phi per vertex and a caption.
+    items : sequence of (Mesh, (n,) float or None, str)
+        Each mesh, its phi per vertex (None: plain clay, e.g. a mesh as read beside what the
+        repair stage made of it) and a caption.
     out : str or path-like
         The PNG file to write.
     panel : int
         Pixel size of each mesh's square panel.
     cmap : str
         A matplotlib colour map.
+    views : sequence of (3, 3) float or None, optional
+        Each mesh's rotation, as `cfsig.figures.raster.default_view` returns (None: its own
+        default view), so that two meshes of one shape can be seen from the same side.
 
     Raises
     ------
@@ -112,14 +124,17 @@ def render_phi(
     width, height = len(items) * panel + _COLORBAR, panel + _CAPTION
     fig = _figure(width, height)
     for i, (mesh, phi, caption) in enumerate(items):
-        image = shade_mesh(mesh, unit_interval(phi), size=(panel, panel), cmap=cmap)
+        values = None if phi is None else unit_interval(phi)
+        view = None if views is None else views[i]
+        image = shade_mesh(mesh, values, view, size=(panel, panel), cmap=cmap)
         ax = fig.add_axes(_box(i * panel, _CAPTION, panel, panel, width, height))
         ax.imshow(_on_white(image), interpolation="nearest")
         ax.set_axis_off()
-        low, high = float(np.min(phi)), float(np.max(phi))
+        if phi is not None:
+            caption += f"\nφ in [{float(np.min(phi)):.3g}, {float(np.max(phi)):.3g}]"
         fig.text(
-            (i + 0.5) * panel / width, (_CAPTION - 2) / height,
-            f"{caption}\nφ in [{low:.3g}, {high:.3g}]", ha="center", va="top", fontsize=9,
+            (i + 0.5) * panel / width, (_CAPTION - 2) / height, caption,
+            ha="center", va="top", fontsize=9,
         )  # fmt: skip
     bar = fig.add_axes(_box(len(items) * panel + 20, _CAPTION + panel * 0.15, 18, panel * 0.7,
                             width, height))  # fmt: skip
@@ -127,6 +142,46 @@ def render_phi(
     bar.set_ylabel("φ, scaled to [0, 1]", fontsize=9)
     bar.tick_params(labelsize=8)
     _save(fig, out)
+
+
+def phi_panels(
+    shown: Sequence[tuple[str | os.PathLike, str, Mesh, np.ndarray, str]],
+) -> tuple[list[tuple[Mesh, np.ndarray | None, str]], list[np.ndarray | None]]:
+    """The panels and views of `render_phi` for meshes through the repair stage.
+
+    A mesh the repair stage changed (any route but ``"clean"``) is shown twice from the same
+    side: as read, in plain clay, then as repaired, coloured by phi, so that what was changed
+    can be seen.
+
+    Parameters
+    ----------
+    shown : sequence of (path, str, Mesh, (n,) float, str)
+        Each mesh's file, caption, repaired mesh, phi on it and route.
+
+    Returns
+    -------
+    items : list of (Mesh, (n,) float or None, str)
+        The panels, for `render_phi`.
+    views : list of (3, 3) float or None
+        Their views, for `render_phi`.
+
+    Raises
+    ------
+    MeshError
+        A file changed since it was read and can no longer be.
+    """
+    items: list[tuple[Mesh, np.ndarray | None, str]] = []
+    views: list[np.ndarray | None] = []
+    for path, caption, mesh, phi, route in shown:
+        if route == "clean":
+            items.append((mesh, phi, caption))
+            views.append(None)
+            continue
+        as_read = read_mesh(path)
+        view = default_view(as_read.vertices)
+        items += [(as_read, None, f"{caption} as read"), (mesh, phi, f"{caption}, {route}")]
+        views += [view, view]
+    return items, views
 
 
 def write_ply(mesh: Mesh, phi: np.ndarray, out: str | os.PathLike, cmap: str = CMAP) -> None:

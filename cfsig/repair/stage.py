@@ -13,11 +13,8 @@ numerics, and chooses one of three routes (docs/method.md, section 1b):
   parts oriented, parts enclosed by another dropped and parts crossing another joined by their
   union (`cfsig.repair.local`); closed parts apart are kept. The rest of the surface is kept
   exactly.
-- ``proxy``: otherwise, the outer surface is rebuilt: the iso-surface, slightly outside the
-  input, of its signed distance with the sign of the generalized winding number (libigl's
-  ``offset_surface``), on a grid of a fixed number of cells along the longest side of the
-  bounding box, so that its resolution follows the shape and not the input's tessellation. It
-  runs in a child process under a time and memory limit (`cfsig.isolate`).
+- ``proxy``: otherwise, the surface is rebuilt on a grid whose cells follow the thinnest
+  parts (`cfsig.repair.proxy`), in a child process under a time and memory limit.
 """
 
 from __future__ import annotations
@@ -31,7 +28,7 @@ from scipy.sparse.csgraph import connected_components
 from cfsig.errors import MeshError, StageLimitError
 from cfsig.files.elements import Edges, edge_lengths, face_areas, mesh_edges
 from cfsig.files.mesh import Mesh, clean_mesh
-from cfsig.isolate import Limits, run_limited
+from cfsig.isolate import Limits
 from cfsig.params import REPAIR_MODES
 from cfsig.repair.local import (
     closed_parts,
@@ -40,7 +37,7 @@ from cfsig.repair.local import (
     split_t_junctions,
     weld_copies,
 )
-from cfsig.repair.simplify import decimate
+from cfsig.repair.proxy import proxy_mesh
 
 # Boundary vertices of different parts closer than this fraction of the bounding-box diagonal
 # are stitched together.
@@ -53,12 +50,6 @@ FRAGMENT_AREA = 0.01
 MAX_PARTS = 256
 # A boundary vertex this close to a boundary edge (fraction of the diagonal) splits it.
 T_JUNCTION = 1e-4
-# The proxy's grid: cells along the bounding box's longest side, and the offset of its
-# iso-surface outside the input, in cells.
-PROXY_CELLS = 64
-PROXY_OFFSET = 2.0
-# Marching cubes gives more faces the larger the surface; the proxy is simplified to this many.
-PROXY_FACES = 8000
 
 
 def repair_mesh(mesh: Mesh, mode: str = "auto", limits: Limits | None = None) -> Mesh:
@@ -463,75 +454,6 @@ def boundary_loops(edges: Edges, n_vertices: int) -> list[np.ndarray]:
         if len(loop) >= 3:
             loops.append(np.array(loop, dtype=np.int64))
     return loops
-
-
-def proxy_mesh(mesh: Mesh, limits: Limits) -> Mesh:
-    """The proxy route: the outer surface rebuilt on a grid, in a child process.
-
-    Parameters
-    ----------
-    mesh : Mesh
-        A checked mesh.
-    limits : Limits
-        Time and memory allowed to the remesh.
-
-    Returns
-    -------
-    mesh : Mesh
-        The proxy's largest part by area, checked, with ``route="proxy"``: parts further apart
-        than the offset stay apart on the grid, and each would get its own unrelated
-        distribution of phi (the paper's drawback this stage exists for).
-
-    Raises
-    ------
-    MeshError
-        The proxy came out empty; `StageLimitError` past the limits.
-    """
-    vertices, faces = run_limited(
-        offset_surface, (mesh.vertices, mesh.faces), limits, "the proxy remesh"
-    )
-    if len(faces) == 0:
-        raise MeshError("the proxy surface is empty (a flat or degenerate model)")
-    proxy = clean_mesh(vertices, faces)
-    n_parts, labels, _ = _surface(proxy)
-    note = f"replaced by a proxy of its outer surface ({len(proxy.faces)} faces)"
-    if n_parts > 1:
-        face_part = labels[proxy.faces[:, 0]]
-        largest = np.argmax(_part_areas(proxy.vertices, proxy.faces, face_part, n_parts))
-        proxy = clean_mesh(proxy.vertices, proxy.faces[face_part == largest], weld=False)
-        note = f"replaced by a proxy of its outer surface, its largest of {n_parts} parts "
-        note += f"({len(proxy.faces)} faces)"
-    return replace(proxy, repairs=(*mesh.repairs, note), route="proxy")
-
-
-def offset_surface(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The iso-surface just outside a triangle soup, on a grid of `PROXY_CELLS` cells.
-
-    Simplified by quadric edge collapses (fast-simplification) to `PROXY_FACES` faces.
-
-    Parameters
-    ----------
-    vertices : (n, 3) float64
-        Vertex positions.
-    faces : (m, 3) int64
-        Triangles, in any orientation.
-
-    Returns
-    -------
-    vertices : (p, 3) float64
-        The iso-surface's vertices.
-    faces : (q, 3) int64
-        Its triangles (marching cubes: closed and manifold).
-    """
-    import igl
-
-    cell = float(np.ptp(vertices, axis=0).max()) / PROXY_CELLS
-    oriented, _ = igl.bfs_orient(faces)
-    result = igl.offset_surface(
-        vertices, oriented, PROXY_OFFSET * cell, PROXY_CELLS,
-        igl.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER,
-    )  # fmt: skip
-    return decimate(result[0], result[1], PROXY_FACES)
 
 
 def _part_areas(
