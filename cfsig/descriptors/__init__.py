@@ -18,6 +18,7 @@ _MODULES = {
     "intrinsic": "cfsig.descriptors.intrinsic",
     "cf": "cfsig.descriptors.cf",
     "sh": "cfsig.descriptors.sh",
+    "lf": "cfsig.descriptors.lf",
 }
 NAMES = tuple(_MODULES)  # the default first
 
