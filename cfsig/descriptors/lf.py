@@ -419,8 +419,11 @@ def fourier_descriptors(distances: np.ndarray) -> np.ndarray:
 
 
 def closed_and_oriented(faces: np.ndarray) -> bool:
-    """Whether triangles form closed surfaces, consistently oriented: each directed edge is
-    used once, and its reverse once.
+    """Whether triangles form oriented surfaces without boundary: each directed edge is used as
+    often as its reverse (edges shared by four faces or more allowed).
+
+    Every line that meets such a surface crosses it as often one way as the other, so it
+    crosses a triangle facing either way.
 
     Parameters
     ----------
@@ -433,9 +436,7 @@ def closed_and_oriented(faces: np.ndarray) -> bool:
     """
     n = int(faces.max()) + 1 if len(faces) else 0
     tails, heads = faces.ravel(), np.roll(faces, -1, axis=1).ravel()
-    edges = np.sort(tails * n + heads)
-    reverse = np.sort(heads * n + tails)
-    return bool(np.array_equal(edges, reverse) and np.all(np.diff(edges) > 0))
+    return bool(np.array_equal(np.sort(tails * n + heads), np.sort(heads * n + tails)))
 
 
 class Views(NamedTuple):
@@ -461,9 +462,9 @@ class Views(NamedTuple):
 def silhouettes(vertices: np.ndarray, faces: np.ndarray) -> Views:
     """The silhouettes of a mesh in every view of its light fields.
 
-    When the triangles form closed, consistently oriented surfaces, each view draws only the
-    triangles that face one way along it: every line of sight through such a surface crosses
-    one of those, so the silhouette is the same, for half the work.
+    When the triangles form oriented surfaces without boundary (`closed_and_oriented`), each
+    view draws only the triangles that face one way along it: every line of sight through such
+    a surface crosses one of those, so the silhouette is the same, for half the work.
 
     Parameters
     ----------
