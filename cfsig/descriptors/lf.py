@@ -239,16 +239,16 @@ def rasterise(corners: np.ndarray, image: np.ndarray, images: int, grid: int) ->
     end = np.clip(np.floor(yc - 0.5) + 1, 0, grid)
     middle = np.clip(np.ceil(yb - 0.5), first, end)
     # each half: first row, rows, the x of its two edges at the first row's centre, slopes
-    halves = np.empty((2, len(corners), 6), np.float32)
+    both = np.empty((2, len(corners), 6), np.float32)
     for half, (start, stop, edge, x0, y0) in enumerate(
         [(first, middle, upper, xa, ya), (middle, end, lower, xb, yb)]
     ):
         centre = start + 0.5
-        halves[half] = np.stack(
+        both[half] = np.stack(
             [start, stop - start, xa + (centre - ya) * long, x0 + (centre - y0) * edge, long, edge],
             axis=1,
         )
-    halves = halves.reshape(-1, 6)
+    halves = both.reshape(-1, 6)
     counts = halves[:, 1].astype(np.int64)
     keep = np.flatnonzero(counts > 0)
     counts = counts[keep]
@@ -568,11 +568,11 @@ def lf_vector(mesh: Mesh, params: Params, cf: ConformalFactor | None, solver: st
 @lru_cache(maxsize=1)
 def _rotation_sums() -> np.ndarray:
     """(VIEWS * VIEWS, ROTATIONS) float32: column r sums the silhouette pairs (a, perm_r(a))."""
-    sums = np.zeros((VIEWS, VIEWS, ROTATIONS), np.float32)
+    pairs = np.zeros((VIEWS, VIEWS, ROTATIONS), np.float32)
     permutations = view_permutations()
     for r in range(ROTATIONS):
-        sums[np.arange(VIEWS), permutations[r], r] = 1
-    sums = sums.reshape(VIEWS * VIEWS, ROTATIONS)
+        pairs[np.arange(VIEWS), permutations[r], r] = 1
+    sums = pairs.reshape(VIEWS * VIEWS, ROTATIONS)
     sums.flags.writeable = False
     return sums
 
@@ -651,8 +651,8 @@ def lf_bounds(queries: np.ndarray, rows: np.ndarray, l1: L1Kernel) -> np.ndarray
     """
     pairs = np.empty((len(queries) * LIGHT_FIELDS, len(rows) * LIGHT_FIELDS), np.float32)
     l1(field_summaries(queries), field_summaries(rows), pairs)
-    pairs = pairs.reshape(len(queries), LIGHT_FIELDS, len(rows), LIGHT_FIELDS)
-    return pairs.min(axis=(1, 3)).astype(np.float64)
+    fields = pairs.reshape(len(queries), LIGHT_FIELDS, len(rows), LIGHT_FIELDS)
+    return fields.min(axis=(1, 3)).astype(np.float64)
 
 
 DESCRIPTOR = Descriptor(
