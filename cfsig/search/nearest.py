@@ -25,7 +25,7 @@ from cfsig.descriptors.base import Distance
 from cfsig.index.blocks import Block, plan_blocks, read_block, read_columns, read_rows
 from cfsig.index.sketch import adjust_bounds, query_sketches, threshold
 from cfsig.index.store import Entry, IndexReader, SegmentView
-from cfsig.search.l1 import Kernel, choose_kernel
+from cfsig.search.l1 import Kernel, choose_kernel, fast_kernel, l1_numpy
 
 _BLOCK_ROWS = 16384  # rows per block of a dataset that is not chunked
 _OUT_CELLS = 1 << 20  # distances computed per kernel call (4 MB): bounds memory for many queries
@@ -99,7 +99,7 @@ def distances(descriptor: str, queries: np.ndarray, signatures: np.ndarray) -> n
     if distance is None:
         return l1_distances(queries, signatures)
     queries, signatures = _float32(queries), _float32(signatures)
-    return distance.exact(queries, signatures, choose_kernel(len(queries) * len(signatures)))
+    return distance.exact(queries, signatures, fast_kernel() or l1_numpy)
 
 
 Score = Callable[[np.ndarray], np.ndarray]
@@ -394,7 +394,7 @@ def nearest_by(
     best = _Best(len(queries), max(min(k, len(reader)), 0), reader.physical_rows)
     if best.k == 0 or len(queries) == 0:
         return best.result(reader)
-    kernel = choose_kernel(len(queries) * len(reader))
+    kernel = fast_kernel() or l1_numpy  # many image pairs per row: faiss repays its import
     bounds = np.full((len(queries), reader.physical_rows), np.inf)
     plans = [plan_blocks(view.signatures, _BLOCK_ROWS) for view in reader.segments]
     for view, plan in zip(reader.segments, plans, strict=True):
