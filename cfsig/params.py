@@ -23,7 +23,8 @@ class Params:
         What the signature is, a name of `cfsig.descriptors.NAMES`: ``"intrinsic"``, the
         default (the spectrum, heat kernel signatures and curvature at scales); ``"cf"``, the
         paper's histogram of phi; ``"sh"`` and ``"lf"``, the spherical harmonic and light field
-        descriptors the paper compares with. ``bins`` to ``normalize`` apply to ``cf`` only, ``seed`` also to ``sh``.
+        descriptors the paper compares with. ``bins`` to ``normalize`` apply to ``cf`` only,
+        ``seed`` also to ``sh``.
     bins : int
         Number of histogram bins (paper section 2.3: 200).
     low, high : float

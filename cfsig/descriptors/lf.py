@@ -9,17 +9,19 @@ The steps, and the choices made where the paper leaves them open (docs/method.md
   rotated so that the 200 directions spread over the sphere (`light_field_rotations`). Opposite
   vertices see mirrored silhouettes, which the features below do not tell apart, so each light
   field keeps `VIEWS` = 10 silhouettes, one per pair of opposite vertices.
-- Silhouettes: orthographic projections, rasterised on a `GRID` x `GRID` grid (a pixel is in
-  the silhouette when its centre is in a projected triangle, `rasterise`). As in the authors'
-  code, each silhouette is centred on the centre of its bounding box, and the unit disk of the
-  moments is the largest distance of a silhouette point from its centre over the light field's
-  10 views, so that the views of one light field keep their relative sizes. Translation and
-  scale of the mesh are normalised by these, so the mesh is not normalised in 3D first.
+- Silhouettes: orthographic projections of a copy simplified to `FACE_LIMIT` faces,
+  rasterised on a `GRID` x `GRID` grid (a pixel is in the silhouette when its centre is in a
+  projected triangle, `rasterise`). Each silhouette is centred on its centroid (the authors'
+  code takes the centre of its bounding box, which moves as the view turns in its plane), and
+  as in their code the unit disk of the moments is the largest distance of a silhouette point
+  from its centre over the light field's 10 views, so that the views of one light field keep
+  their relative sizes. Translation and scale of the mesh are normalised by these, so the mesh
+  is not normalised in 3D first.
 - Features per silhouette: the magnitudes of the 35 Zernike moments of orders 1 to 10
-  (`zernike_basis`), divided by the zeroth (the area), so each lies in [0, 1]; and 10 Fourier
-  descriptors of the contour, the magnitudes of frequencies 1 to 10 of the distance from the
-  centre to the silhouette's outer edge, sampled in `ANGLES` directions (`edge_radii`), divided
-  by frequency 0. Both are quantised to 8 bits as the authors' code does: ``floor(256 x)``
+  (`zernike_magnitudes`), divided by the zeroth (the area), so each lies in [0, 1]; and 10
+  Fourier descriptors of the contour, the magnitudes of frequencies 1 to 10 of the distance
+  from the centre along the silhouette's longest boundary (`contour_distances`), divided by
+  frequency 0. Both are quantised to 8 bits as the authors' code does: ``floor(256 x)``
   (``floor(512 x)`` for the Fourier descriptors), at most 255.
 - Distance (`lf_distances`): between two silhouettes, the L1 distance of their 45 features;
   between two light fields, the smallest sum of the 10 silhouette distances over the 60
@@ -36,9 +38,10 @@ from __future__ import annotations
 
 from functools import lru_cache
 from math import comb, factorial
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numpy as np
+from contourpy import contour_generator
 
 from cfsig.descriptors.base import Computed, Descriptor, Distance, L1Kernel
 from cfsig.files.mesh import Mesh
@@ -54,8 +57,7 @@ GRID = 128  # pixels per side of a silhouette's grid
 ORDER = 10  # largest order of the Zernike moments
 ZERNIKE = 35  # the moments (n, m) with 1 <= n <= ORDER, 0 <= m <= n, n - m even
 FOURIER = 10  # Fourier descriptors: frequencies 1..FOURIER of the edge's distance
-ANGLES = 64  # directions in which the edge's distance is sampled
-RAY_SAMPLES = 64  # samples along each direction
+CONTOUR_POINTS = 128  # points of a silhouette's contour its Fourier descriptors are taken at
 FEATURES = ZERNIKE + FOURIER
 MONOMIALS = (ORDER + 1) * (ORDER + 2) // 2
 QUANT = 256  # the authors' 8-bit quantisation: floor(QUANT * value), at most 255
@@ -368,34 +370,39 @@ def zernike_magnitudes(images: np.ndarray, centres: np.ndarray, radii: np.ndarra
     return np.divide(moments[:, 1:], area, out=np.zeros((len(images), ZERNIKE)), where=area > 0)
 
 
-def edge_radii(images: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """The distance from the centre of each silhouette to its outer edge, by direction.
+def contour_distances(images: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """The distance from the centre of each silhouette along its outer contour.
+
+    The contour is the longest of the silhouette's boundaries (contourpy's marching squares at
+    level 1/2), resampled at `CONTOUR_POINTS` points equally spaced along its length from where
+    contourpy starts it: the Fourier magnitudes taken of it do not depend on that start.
 
     Parameters
     ----------
-    images, centres, radii
-        As `zernike_magnitudes` takes them.
+    images : (k, grid, grid) bool
+        Silhouettes, the grid spanning [-1, 1] (y up, row 0 at the top).
+    centres : (k, 2) float64
+        The centre (x, y) of each, in the grid's units.
 
     Returns
     -------
-    distances : (k, ANGLES) float64
-        Along each of `ANGLES` rays from the centre, the distance of the farthest of
-        `RAY_SAMPLES` samples in the silhouette (0 where none is), relative to the radius.
+    distances : (k, CONTOUR_POINTS) float64
+        Distances from the centre, in the grid's units; zero for an empty silhouette.
     """
     grid = images.shape[1]
-    steps = (np.arange(RAY_SAMPLES) + 0.5) / RAY_SAMPLES
-    angle = 2 * np.pi * np.arange(ANGLES) / ANGLES
-    reach = radii[:, None, None] * steps  # (k, 1, samples)
-    x = centres[:, :1, None] + reach * np.cos(angle)[:, None]
-    y = centres[:, 1:, None] + reach * np.sin(angle)[:, None]
-    column = np.floor((x + 1) * (grid / 2)).astype(np.int64)
-    row = np.floor((1 - y) * (grid / 2)).astype(np.int64)
-    within = (column >= 0) & (column < grid) & (row >= 0) & (row < grid)
-    pixel = np.where(within, row * grid + column, 0)
-    flat = images.reshape(len(images), -1)
-    inside = np.take_along_axis(flat, pixel.reshape(len(images), -1), axis=1)
-    inside = inside.reshape(pixel.shape) & within
-    return np.where(inside, steps, 0.0).max(axis=2)
+    axis = (np.arange(grid) + 0.5) / (grid / 2) - 1
+    out = np.zeros((len(images), CONTOUR_POINTS))
+    for i, image in enumerate(images):
+        generator = contour_generator(axis, axis, image[::-1].astype(np.float64), name="serial")
+        lines = cast(list[np.ndarray], generator.lines(0.5))  # the default type: separate lines
+        if not lines:
+            continue
+        line = max(lines, key=len)
+        along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(line, axis=0).T))])
+        at = np.linspace(0, along[-1], CONTOUR_POINTS, endpoint=False)
+        x, y = np.interp(at, along, line[:, 0]), np.interp(at, along, line[:, 1])
+        out[i] = np.hypot(x - centres[i, 0], y - centres[i, 1])
+    return out
 
 
 def fourier_descriptors(distances: np.ndarray) -> np.ndarray:
@@ -403,8 +410,8 @@ def fourier_descriptors(distances: np.ndarray) -> np.ndarray:
 
     Parameters
     ----------
-    distances : (k, ANGLES) float64
-        As `edge_radii` returns.
+    distances : (k, points) float64
+        As `contour_distances` returns.
 
     Returns
     -------
@@ -536,7 +543,7 @@ def image_features(views: Views) -> np.ndarray:
         Whole numbers in [0, 255].
     """
     zernike = quantise(zernike_magnitudes(*views))
-    fourier = quantise(fourier_descriptors(edge_radii(*views)), FOURIER_SCALE)
+    fourier = quantise(fourier_descriptors(contour_distances(*views[:2])), FOURIER_SCALE)
     return np.hstack([zernike, fourier])
 
 
