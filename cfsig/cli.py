@@ -396,7 +396,7 @@ def _format_routes(routes: Counter[str]) -> str:
     help="Each query is a part of a shape (a cut, a scan, holes): find the wholes it belongs to.",
 )
 def query(index_file, meshes, k, solver, stage_timeout, as_json, png, partial) -> None:
-    """Find the k indexed meshes nearest to each query mesh (L1 distance).
+    """Find the k indexed meshes nearest to each query mesh (L1 distance; lf: its own).
 
     The query signatures are computed with the index's own parameters. With --partial the
     first result is the whole whose curvature at small scales matches the part's best (its

@@ -22,9 +22,9 @@ class Params:
     descriptor : str
         What the signature is, a name of `cfsig.descriptors.NAMES`: ``"intrinsic"``, the
         default (the spectrum, heat kernel signatures and curvature at scales); ``"cf"``, the
-        paper's histogram of phi; ``"sh"`` and ``"gps"``, the spherical harmonic descriptor and
-        the global point signature the paper compares with. ``bins`` to ``normalize`` apply to
-        ``cf`` only, ``seed`` also to ``sh`` and ``gps``.
+        paper's histogram of phi; ``"sh"``, ``"gps"`` and ``"lf"``, the spherical harmonic
+        descriptor, the global point signature and the light field descriptor the paper compares
+        with. ``bins`` to ``normalize`` apply to ``cf`` only, ``seed`` also to ``sh`` and ``gps``.
     bins : int
         Number of histogram bins (paper section 2.3: 200).
     low, high : float

@@ -19,6 +19,7 @@ _MODULES = {
     "cf": "cfsig.descriptors.cf",
     "sh": "cfsig.descriptors.sh",
     "gps": "cfsig.descriptors.gps",
+    "lf": "cfsig.descriptors.lf",
 }
 NAMES = tuple(_MODULES)  # the default first
 

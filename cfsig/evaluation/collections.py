@@ -28,7 +28,7 @@ from cfsig.files.folders import find_meshes, mesh_label
 from cfsig.index.store import IndexReader
 from cfsig.isolate import Limits
 from cfsig.params import Params
-from cfsig.search.nearest import l1_distances
+from cfsig.search.nearest import distances as descriptor_distances
 from cfsig.search.partial import Part, curvature_columns, expanded_distances, partial_file
 
 
@@ -49,6 +49,9 @@ class Collection:
     seconds : np.ndarray or None
         Shape (n,), seconds: wall time of each signature, reading included; None when the
         signatures were not timed (read from an index).
+    descriptor : str
+        The descriptor of the signatures (a name of `cfsig.descriptors.NAMES`), which decides
+        how they compare (`cfsig.search.nearest.distances`).
 
     Raises
     ------
@@ -61,6 +64,7 @@ class Collection:
     paths: tuple[str, ...]
     signatures: np.ndarray
     seconds: np.ndarray | None = None
+    descriptor: str = descriptors.NAMES[0]
 
     def __post_init__(self) -> None:
         """Check that every attribute has one entry per mesh."""
@@ -101,6 +105,7 @@ class Collection:
             paths,
             self.signatures[rows],
             None if self.seconds is None else self.seconds[rows],
+            self.descriptor,
         )
 
 
@@ -116,7 +121,8 @@ class Evaluation:
         The m meshes evaluated (those with a class, and common to all the collections evaluated
         together), in file order, labelled with the classes the measures used.
     distances : np.ndarray
-        Shape (m, m), float64: L1 distances between their signatures.
+        Shape (m, m), float64: the descriptor's distances between their signatures
+        (`cfsig.search.nearest.distances`: L1 for most).
     seconds_per_mesh : float or None
         Median seconds per mesh over the whole collection given (not only the evaluated
         meshes); None when it was not timed.
@@ -194,6 +200,7 @@ def compute_collection(
             len(order), descriptors.layout(params).length
         ),  # (0, length) if every file failed
         np.array([signatures[path].seconds for path in order], dtype=float),
+        params.descriptor,
     )
     return collection, failures
 
@@ -220,7 +227,8 @@ def collection_from_index(path: str | os.PathLike) -> tuple[str, Collection]:
     """
     with IndexReader(path) as reader:
         names, labels, paths = (tuple(reader.column(key)) for key in ("names", "labels", "paths"))
-        return reader.params.descriptor, Collection(names, labels, paths, reader.signatures[:])
+        name = reader.params.descriptor
+        return name, Collection(names, labels, paths, reader.signatures[:], descriptor=name)
 
 
 def evaluate_partial(
@@ -297,7 +305,8 @@ def _measured_part(path: Path, params: Params) -> Part | str:
 def evaluate_collections(
     collections: Mapping[str, Collection], classes: Mapping[str, str] | None = None
 ) -> dict[str, Evaluation]:
-    """Evaluate one or several collections side by side on the same meshes (leave-one-out, L1).
+    """Evaluate one or several collections side by side on the same meshes (leave-one-out, each
+    by its descriptor's distance).
 
     The meshes evaluated are those whose names are in every collection and that have a class,
     so that the measures of several descriptors of one folder compare the same queries.
@@ -337,7 +346,8 @@ def _evaluate(
     pairs = enumerate(zip(collection.names, labels, strict=True))
     keep = [i for i, (name, label) in pairs if name in common and label]
     evaluated = replace(collection.subset(keep), labels=tuple(str(labels[i]) for i in keep))
-    distances = l1_distances(evaluated.signatures, evaluated.signatures)
+    signatures = evaluated.signatures
+    distances = descriptor_distances(collection.descriptor, signatures, signatures)
     report = evaluate_distances(distances, evaluated.labels)
     seconds = None if collection.seconds is None else float(np.median(collection.seconds))
     return Evaluation(report, evaluated, distances, seconds)

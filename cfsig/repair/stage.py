@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from cfsig.errors import MeshError, StageLimitError
+from cfsig.errors import StageLimitError
 from cfsig.files.elements import Edges, edge_lengths, face_areas, mesh_edges
 from cfsig.files.mesh import Mesh, clean_mesh
 from cfsig.isolate import Limits

@@ -1,7 +1,9 @@
-"""Nearest neighbours: rank indexed signatures by L1 distance to query signatures (paper 2.3).
+"""Nearest neighbours: rank indexed signatures by their distance to query signatures (paper 2.3).
 
-Every descriptor's vector is built so that its L1 distance is the descriptor's distance
-(`signature.signature_of`), so the search is the same for all.
+Most descriptors' vectors are built so that their L1 distance is the descriptor's distance, and
+the search is the same for all of them (`nearest`). A descriptor that declares a distance of
+its own (`cfsig.descriptors.base.Distance`) is searched by its lower bound and then exactly
+(`nearest_by`); `query` and `distances` choose for the index's descriptor.
 """
 
 from __future__ import annotations
@@ -18,10 +20,12 @@ from typing import TypeVar
 import h5py
 import numpy as np
 
+from cfsig import descriptors
+from cfsig.descriptors.base import Distance
 from cfsig.index.blocks import Block, plan_blocks, read_block, read_columns, read_rows
 from cfsig.index.sketch import adjust_bounds, query_sketches, threshold
 from cfsig.index.store import Entry, IndexReader, SegmentView
-from cfsig.search.l1 import Kernel, choose_kernel
+from cfsig.search.l1 import Kernel, choose_kernel, fast_kernel, l1_numpy
 
 _BLOCK_ROWS = 16384  # rows per block of a dataset that is not chunked
 _OUT_CELLS = 1 << 20  # distances computed per kernel call (4 MB): bounds memory for many queries
@@ -30,6 +34,7 @@ _BOUND_CELLS = 1 << 25  # bounds held at once (128 MB): the queries of one scan 
 _FIRST = 1024  # rows of smallest bounds evaluated first per query (at least 4 k)
 _SAMPLE = 65536  # bounds sampled to find the cutoff of those rows
 _SCAN_RATIO = 4  # a full scan when the candidates are a quarter of the rows or more
+_EXACT_BATCH = 64  # rows of smallest bounds whose exact distances are computed at a time
 
 
 @dataclass(frozen=True)
@@ -41,7 +46,8 @@ class Hit:
     rank : int
         1 for the nearest.
     distance : float
-        L1 distance between the signature vectors (in [0, 2] for ``cf`` histograms).
+        L1 distance between the signature vectors (in [0, 2] for ``cf`` histograms), or the
+        descriptor's own distance where it declares one.
     entry : Entry
         Name, label and path of the indexed mesh.
     """
@@ -70,6 +76,30 @@ def l1_distances(queries: np.ndarray, signatures: np.ndarray) -> np.ndarray:
     out = np.empty((len(queries), len(signatures)), np.float32)
     choose_kernel(out.size)(queries, signatures, out)
     return out.astype(np.float64)
+
+
+def distances(descriptor: str, queries: np.ndarray, signatures: np.ndarray) -> np.ndarray:
+    """A descriptor's distances between two sets of its signatures.
+
+    Parameters
+    ----------
+    descriptor : str
+        A name of `cfsig.descriptors.NAMES`.
+    queries : (q, length) float
+        Query signatures.
+    signatures : (N, length) float
+        Signatures to compare with.
+
+    Returns
+    -------
+    distances : (q, N) float64
+        `l1_distances`, or the descriptor's own distance where it declares one.
+    """
+    distance = descriptors.get(descriptor).distance
+    if distance is None:
+        return l1_distances(queries, signatures)
+    queries, signatures = _float32(queries), _float32(signatures)
+    return distance.exact(queries, signatures, fast_kernel() or l1_numpy)
 
 
 Score = Callable[[np.ndarray], np.ndarray]
@@ -331,6 +361,71 @@ class _Pruned:
                     self.best.merge_rows(j, picked, dist[0])
 
 
+def nearest_by(
+    reader: IndexReader, queries: np.ndarray, k: int, distance: Distance
+) -> tuple[np.ndarray, np.ndarray]:
+    """The k nearest indexed signatures of each query by a descriptor's own distance, exactly.
+
+    Every live row's lower bound (``distance.bound``) is computed in one pass over the rows;
+    then each query's rows are taken in order of their bounds and their exact distances
+    computed, a batch at a time, until the next bound exceeds the k-th best distance found. No
+    row left out could rank, so the result is the one a full scan of exact distances gives.
+
+    Parameters
+    ----------
+    reader : IndexReader
+        An open index with N entries.
+    queries : (q, length) float
+        Query signatures, made with the index's parameters.
+    k : int
+        Number of results per query; at most N are returned.
+    distance : Distance
+        The index's descriptor's distance.
+
+    Returns
+    -------
+    rows : (q, min(k, N)) int64
+        Row numbers of the results, nearest first, ties broken by row number.
+    distances : (q, min(k, N)) float64
+        Their exact distances, as ``distance.exact`` computes them in float32 (rounded to
+        float32 here, as `nearest` returns).
+    """
+    queries = _float32(np.atleast_2d(queries))
+    best = _Best(len(queries), max(min(k, len(reader)), 0), reader.physical_rows)
+    if best.k == 0 or len(queries) == 0:
+        return best.result(reader)
+    kernel = fast_kernel() or l1_numpy  # many image pairs per row: faiss repays its import
+    bounds = np.full((len(queries), reader.physical_rows), np.inf)
+    plans = [plan_blocks(view.signatures, _BLOCK_ROWS) for view in reader.segments]
+    for view, plan in zip(reader.segments, plans, strict=True):
+        buffer = np.empty(
+            (min(_BLOCK_ROWS, view.signatures.shape[0]), queries.shape[1]), np.float32
+        )
+        for block in plan:
+            rows = read_block(view.signatures, block, buffer)
+            at = slice(view.start + block.start, view.start + block.stop)
+            bounds[:, at] = distance.bound(queries, np.ascontiguousarray(rows), kernel)
+        bounds[:, view.start + view.dead] = np.inf
+    starts = np.array([view.start for view in reader.segments], np.int64)
+    batch = max(best.k, _EXACT_BATCH)
+    for j, query in enumerate(queries):
+        order = np.argsort(bounds[j], kind="stable")
+        order = order[np.isfinite(bounds[j, order])]
+        for first in range(0, len(order), batch):
+            kth = best.kth(j)
+            if bounds[j, order[first]] > kth:  # False while fewer than k are held (NaN)
+                break
+            picked = np.sort(order[first : first + batch])
+            seg = np.searchsorted(starts, picked, side="right") - 1
+            for i in np.unique(seg):
+                view, mine = reader.segments[i], picked[seg == i]
+                buffer = np.empty((len(mine), queries.shape[1]), np.float32)
+                values = read_rows(view.signatures, plans[i], mine - view.start, buffer)
+                exact = distance.exact(query[None], np.ascontiguousarray(values), kernel)
+                best.merge_rows(j, mine, exact[0].astype(np.float32))
+    return best.result(reader)
+
+
 def query(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[Hit]]:
     """The k nearest indexed meshes of each query, with their names and labels.
 
@@ -346,9 +441,14 @@ def query(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[Hi
     Returns
     -------
     hits : list of list of Hit
-        One list per query, nearest first.
+        One list per query, nearest first: by L1 distance (`nearest`), or by the descriptor's
+        own distance where it declares one (`nearest_by`).
     """
-    rows, dists = nearest(reader, queries, k)
+    distance = descriptors.get(reader.params.descriptor).distance
+    if distance is None:
+        rows, dists = nearest(reader, queries, k)
+    else:
+        rows, dists = nearest_by(reader, queries, k, distance)
     entries = reader.entries(rows.ravel()) if rows.size else []
     it = iter(entries)
     return [[Hit(rank + 1, float(d), next(it)) for rank, d in enumerate(row)] for row in dists]

@@ -1,0 +1,240 @@
+"""The light field descriptor ``lf`` (cfsig.descriptors.lf) of Chen et al. 2003, and the search
+by its own distance."""
+
+from math import factorial
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cfsig.cli import main
+from cfsig.descriptors import lf
+from cfsig.descriptors.signature import Signature, compute_signature
+from cfsig.files.demo import capsule, limbed_body, torus
+from cfsig.files.mesh import clean_mesh
+from cfsig.index.store import Entry, IndexReader, IndexWriter
+from cfsig.params import Layout, Params
+from cfsig.search.l1 import l1_numpy
+from cfsig.search.nearest import distances, nearest_by, query
+from tests.helpers import icosphere, random_rotation, write_off
+
+LF = Params(descriptor="lf")
+MESHES = {
+    "limbs3": lambda: limbed_body(3, pose=1),
+    "limbs5": lambda: limbed_body(5, pose=2),
+    "torus": lambda: torus(wave=0.2),
+    "capsule": lambda: capsule(bend=0.6),
+}
+
+
+def _vector(v, f):
+    return lf.lf_vector(clean_mesh(v, f), LF, None, "auto").vector
+
+
+def _distance(a, b):
+    return float(lf.lf_distances(np.float32([a]), np.float32([b]), l1_numpy)[0, 0])
+
+
+@pytest.fixture(scope="module")
+def vectors():
+    return {name: _vector(*make()) for name, make in MESHES.items()}
+
+
+def test_the_dodecahedron_rotations_permute_its_views():
+    vertices = lf.dodecahedron()
+    rotations = lf.dodecahedron_rotations()
+    assert rotations.shape == (60, 3, 3)
+    for r in rotations:
+        np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-12)
+        assert np.linalg.det(r) == pytest.approx(1)
+        turned = vertices @ r.T
+        assert np.abs(turned[:, None] - vertices[None]).sum(axis=2).min(axis=1).max() < 1e-9
+    perms = lf.view_permutations()
+    assert all(sorted(p) == list(range(lf.VIEWS)) for p in perms)
+    assert len({tuple(p) for p in perms}) == 60  # no two rotations pair the views alike
+
+
+def test_rasterise_fills_the_pixel_centres_inside():
+    square = np.float32([[[2, 2], [10, 2], [10, 6]], [[2, 2], [10, 6], [2, 6]]])
+    image = lf.rasterise(square, np.array([0, 0]), 1, 16)[0]
+    expected = np.zeros((16, 16), bool)
+    expected[2:6, 2:10] = True
+    np.testing.assert_array_equal(image, expected)
+    triangle = np.float32([[[1.3, 2.1], [60.2, 9.7], [20.5, 55.9]]])
+    (ax, ay), (bx, by) = triangle[0, 1] - triangle[0, 0], triangle[0, 2] - triangle[0, 0]
+    area = abs(ax * by - ay * bx) / 2
+    filled = lf.rasterise(triangle, np.array([0]), 1, 64).sum()
+    assert filled == pytest.approx(area, rel=0.03)
+
+
+def _radial(n: int, m: int, rho: float) -> float:
+    return sum(
+        (-1) ** s
+        * factorial(n - s)
+        / (factorial(s) * factorial((n + m) // 2 - s) * factorial((n - m) // 2 - s))
+        * rho ** (n - 2 * s)
+        for s in range((n - m) // 2 + 1)
+    )
+
+
+def test_zernike_moments_of_a_disk():
+    """A centred disk of radius a: the moments with m > 0 vanish, those with m = 0 are
+    ``integral_0^a R_n0(rho) rho d rho / integral_0^a rho d rho``; the unit disk's all vanish."""
+    grid, a = 256, 0.6
+    centres = (np.arange(grid) + 0.5) / (grid / 2) - 1
+    x, y = np.meshgrid(centres, centres)
+    disks = np.stack([np.hypot(x, y) <= a, np.hypot(x - 0.2, y + 0.1) <= a])
+    shifted = np.array([[0.0, 0.0], [0.2, -0.1]])  # y up in the moments' units
+    found = lf.zernike_magnitudes(disks, shifted, np.ones(2))
+    pairs = [(n, m) for n in range(1, lf.ORDER + 1) for m in range(n % 2, n + 1, 2)]
+    expected = [
+        abs(sum(_radial(n, 0, r) * r for r in np.linspace(0, a, 20001)[1:]) * a / 20000)
+        / (a**2 / 2)
+        if m == 0
+        else 0.0
+        for n, m in pairs
+    ]
+    np.testing.assert_allclose(found[0], expected, atol=0.01)
+    assert np.abs(found[1] - found[0]).max() > 0.05  # off centre, the moments move
+    unit = lf.zernike_magnitudes(
+        np.hypot(x, y)[None] <= 1, np.zeros((1, 2)), np.ones(1)
+    )  # the whole disk of the moments: orthogonal to every moment after (0, 0)
+    assert unit.max() < 0.01
+
+
+def test_fourier_descriptors_of_the_contour():
+    """A centred disk's contour is at one distance: no frequency but 0. An ellipse's distance
+    repeats twice a turn: frequency 2 leads, the odd ones vanish. A rotated copy, or the
+    mirror image, has the same descriptors."""
+    grid = 128
+    centres = (np.arange(grid) + 0.5) / (grid / 2) - 1
+    x, y = np.meshgrid(centres, -centres)
+    c, s = np.cos(0.7), np.sin(0.7)
+    shapes = np.stack(
+        [
+            np.hypot(x, y) <= 0.8,
+            (x / 0.8) ** 2 + (y / 0.4) ** 2 <= 1,
+            ((c * x + s * y) / 0.8) ** 2 + ((c * y - s * x) / 0.4) ** 2 <= 1,
+            ((c * x - s * y) / 0.8) ** 2 + ((c * y + s * x) / 0.4) ** 2 <= 1,
+        ]
+    )
+    found = lf.fourier_descriptors(lf.contour_distances(shapes, np.zeros((4, 2))))
+    assert found[0].max() < 0.01
+    assert np.argmax(found[1]) == 1 and found[1, 1] > 0.1
+    assert found[1, ::2].max() < 0.01  # frequencies 1, 3, 5...
+    np.testing.assert_allclose(found[2:], found[[1, 1]], atol=0.01)
+
+
+def test_features_are_whole_numbers_in_8_bits(vectors):
+    for vector in vectors.values():
+        assert vector.shape == (lf.LENGTH,)
+        assert np.array_equal(vector, np.round(vector)) and vector.min() >= 0
+        assert vector.max() <= 255
+
+
+def test_identical_silhouettes_are_at_distance_zero(vectors):
+    """A sphere inside the mesh changes none of its silhouettes; moving and scaling it
+    changes none of their features."""
+    v, f = torus(wave=0.2)
+    assert len(f) < lf.FACE_LIMIT  # drawn as it is, not simplified
+    inner_v, inner_f = icosphere(1)
+    inside = 0.05 * inner_v + v[np.argmin(v[:, 0])] * 0.9  # within the tube
+    both = (np.vstack([v, inside]), np.vstack([f, inner_f + len(v)]))
+    assert _distance(vectors["torus"], _vector(*both)) == 0
+    assert _distance(vectors["torus"], _vector(3.5 * v + [1.0, -2.0, 0.5], f)) == 0
+
+
+@pytest.mark.parametrize("name", sorted(MESHES))
+def test_rotation_invariance(vectors, name):
+    """Turned by a rotation of the dodecahedron, a mesh keeps its silhouettes (up to the pixel
+    grid): its distance is far below that to any other shape; turned by any rotation, well
+    below."""
+    v, f = MESHES[name]()
+    others = min(_distance(vectors[name], vectors[o]) for o in MESHES if o != name)
+    turned = _vector(v @ lf.dodecahedron_rotations()[17].T, f)
+    assert _distance(vectors[name], turned) < 0.15 * others
+    turned = _vector(v @ random_rotation(4).T, f)
+    assert _distance(vectors[name], turned) < 0.5 * others
+
+
+def test_the_bound_is_below_the_distance(vectors):
+    rng = np.random.default_rng(3)
+    real = np.float32(list(vectors.values()))
+    noisy = np.clip(real + rng.integers(-30, 30, real.shape), 0, 255).astype(np.float32)
+    rows = np.vstack([real, noisy, rng.integers(0, 256, (3, lf.LENGTH)).astype(np.float32)])
+    exact = lf.lf_distances(rows, rows, l1_numpy)
+    bounds = lf.lf_bounds(rows, rows, l1_numpy)
+    assert np.all(bounds <= exact) and np.all(np.diag(exact) == 0)
+    np.testing.assert_array_equal(exact, exact.T)
+    assert bounds[exact > 0].mean() > 0.3 * exact[exact > 0].mean()  # bounds that prune
+
+
+def _signature(vector: np.ndarray, seed: int) -> Signature:
+    return Signature(
+        vector=vector, phi=None, n_vertices=3, n_faces=1, n_components=1,
+        curvature_error=float("nan"), repairs=(), route="clean", seconds=0.0,
+        sha256=f"{seed:064d}",
+    )  # fmt: skip
+
+
+def test_search_equals_a_full_scan(tmp_path, vectors):
+    """Rows near a few shapes, duplicates among them (ties), in two segments with a row
+    superseded: the bounded search returns the full scan's rows and distances."""
+    rng = np.random.default_rng(7)
+    base = np.float32(list(vectors.values()))
+    rows = [np.clip(base[i % 4] + rng.integers(-40, 40, lf.LENGTH), 0, 255) for i in range(30)]
+    rows[5] = rows[9] = rows[2]
+    rows = [np.float32(r) for r in rows]
+    path = tmp_path / "index"
+    for first, last in ((0, 18), (18, 30)):
+        with IndexWriter(path, LF, Layout(lf.LENGTH)) as writer:
+            for i in range(first, last):
+                writer.add(Entry(f"c/{i}.off", "c", f"/c/{i}.off"), _signature(rows[i], i))
+    with IndexWriter(path, LF, Layout(lf.LENGTH)) as writer:  # supersede row 3
+        rows[3] = np.float32(base[1])
+        writer.add(Entry("c/3.off", "c", "/c/3.off"), _signature(rows[3], 99))
+    queries = np.float32([rows[2], base[0], base[3], rows[20]])
+    full = distances("lf", queries, np.array(rows))
+    with IndexReader(path) as reader:
+        names = list(reader.column("names"))
+        order = [int(n.split("/")[1].split(".")[0]) for n in names]
+        for k in (1, 3, 7):
+            found, dist = nearest_by(reader, queries, k, lf.DESCRIPTOR.distance)
+            for j in range(len(queries)):
+                scan = full[j, order]
+                expected = np.lexsort((np.arange(len(order)), scan))[:k]
+                np.testing.assert_array_equal(found[j], expected)
+                np.testing.assert_array_equal(dist[j], np.float32(scan[expected]))
+        hits = query(reader, queries[:1], 3)[0]
+        assert [h.distance for h in hits] == [0.0, 0.0, 0.0]
+
+
+def test_the_command_line_indexes_queries_evaluates_and_checks(tmp_path):
+    meshes = {
+        "round/a.off": icosphere(2),
+        "round/b.off": (icosphere(2)[0] * [1.0, 1.1, 0.9], icosphere(2)[1]),
+        "long/a.off": capsule(length=2.0),
+        "long/b.off": capsule(length=2.2, bend=0.2),
+    }
+    for name, (v, f) in meshes.items():
+        write_off(tmp_path / "data" / name, v, f)
+    runner = CliRunner()
+    index = str(tmp_path / "index")
+    out = runner.invoke(main, ["index", str(tmp_path / "data"), "-o", index, "--descriptor", "lf"])
+    assert out.exit_code == 0, out.output
+    out = runner.invoke(main, ["query", index, str(tmp_path / "data/long/a.off"), "-k", "2"])
+    assert out.exit_code == 0, out.output
+    lines = out.output.splitlines()
+    assert lines[1].split()[1:] == ["0.0000", "long/a.off", "long"]
+    assert lines[2].split()[3] == "long"
+    out = runner.invoke(main, ["evaluate", "--index", index, "--json"])
+    assert out.exit_code == 0, out.output
+    assert '"NN": 1.0' in out.output
+    out = runner.invoke(main, ["check", index])
+    assert out.exit_code == 0 and "healthy (4 entries" in out.output
+
+
+def test_signature_goes_through_the_repair_stage():
+    v, f = capsule()
+    sig = compute_signature(clean_mesh(v, f), LF)
+    assert sig.vector.shape == (lf.LENGTH,) and sig.route == "clean" and sig.phi is None
