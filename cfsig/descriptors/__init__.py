@@ -20,6 +20,7 @@ _MODULES = {
     "sh": "cfsig.descriptors.sh",
     "gps": "cfsig.descriptors.gps",
     "lf": "cfsig.descriptors.lf",
+    "rigid": "cfsig.descriptors.rigid",
 }
 NAMES = tuple(_MODULES)  # the default first
 

@@ -1,0 +1,187 @@
+"""The descriptor ``rigid`` (cfsig.descriptors.rigid): the channels of ``intrinsic``, ``sh`` and
+``lf`` weighed together, and the search by its own distance."""
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cfsig import descriptors
+from cfsig.cli import main
+from cfsig.descriptors import intrinsic, lf, rigid
+from cfsig.descriptors.signature import Signature, compute_signature
+from cfsig.files.demo import capsule, limbed_body, torus
+from cfsig.files.mesh import clean_mesh
+from cfsig.index.store import Entry, IndexReader, IndexWriter
+from cfsig.params import Layout, Params
+from cfsig.search.l1 import l1_numpy
+from cfsig.search.nearest import distances, nearest_by, query
+from tests.helpers import icosphere, open_cylinder, random_rotation, write_off
+
+RIGID = Params(descriptor="rigid")
+MESHES = {
+    "limbs3": lambda: limbed_body(3, pose=1),
+    "limbs5": lambda: limbed_body(5, pose=2),
+    "torus": lambda: torus(wave=0.2),
+    "capsule": lambda: capsule(bend=0.6),
+}
+
+
+def _vector(v, f):
+    return rigid.rigid_vector(clean_mesh(v, f), RIGID, None, "auto").vector
+
+
+def _distance(a, b):
+    return float(rigid.rigid_distances(np.float32([a]), np.float32([b]), l1_numpy)[0, 0])
+
+
+@pytest.fixture(scope="module")
+def vectors():
+    return {name: _vector(*make()) for name, make in MESHES.items()}
+
+
+def _nearest_other(vectors, name):
+    return min(_distance(vectors[name], vectors[o]) for o in vectors if o != name)
+
+
+def test_the_distance_weighs_the_channels_of_the_three_descriptors():
+    """The distance of two meshes is the sum over the five channels of each one's distance, as
+    its own descriptor measures it, times its weight over its median."""
+    meshes = [clean_mesh(*make()) for make in (MESHES["limbs3"], MESHES["capsule"])]
+    parts = {
+        name: [descriptors.get(name).compute(m, Params(descriptor=name), None, "auto").vector
+               for m in meshes]
+        for name in ("intrinsic", "sh", "lf")
+    }  # fmt: skip
+    cut = (intrinsic.EIGENPAIRS, intrinsic.EIGENPAIRS + intrinsic.QUANTILES * len(intrinsic.TIMES))
+    a, b = parts["intrinsic"]
+    channel = {
+        "spectrum": np.abs(a[: cut[0]] - b[: cut[0]]).sum(),
+        "heat": np.abs(a[cut[0] : cut[1]] - b[cut[0] : cut[1]]).sum(),
+        "curvature": np.abs(a[cut[1] :] - b[cut[1] :]).sum(),
+        "sh": np.abs(parts["sh"][0] - parts["sh"][1]).sum(),
+        "lf": lf.lf_distances(*(np.float32([v]) for v in parts["lf"]), l1_numpy)[0, 0],
+    }
+    expected = sum(rigid.scale(name) * value for name, value in channel.items())
+    found = [rigid.rigid_vector(m, RIGID, None, "auto").vector for m in meshes]
+    assert found[0].shape == (rigid.LENGTH,) == (descriptors.layout(RIGID).length,)
+    assert _distance(*found) == pytest.approx(expected, rel=1e-5)
+    assert all(rigid.WEIGHTS[name] > 0 for name in rigid.CHANNELS)
+
+
+@pytest.mark.parametrize("name", sorted(MESHES))
+def test_rotation_invariance(vectors, name):
+    """A rotated shape lies far nearer its unrotated self than any other shape does."""
+    v, f = MESHES[name]()
+    turned = _vector(v @ random_rotation(len(name)).T, f)
+    assert _distance(vectors[name], turned) < 0.3 * _nearest_other(vectors, name)
+
+
+def test_translation_and_scale_invariance(vectors):
+    """Moved and scaled, a shape stays within 2% of its distance to any other: only round-off
+    (a pixel of a silhouette, a feature's last quantum) moves it."""
+    v, f = MESHES["limbs3"]()
+    nearest = _nearest_other(vectors, "limbs3")
+    for factor, shift in ((0.01, [3.0, -1.0, 2.0]), (250.0, [-40.0, 7.0, 0.5])):
+        moved = _vector(v * factor + shift, f)
+        assert _distance(vectors["limbs3"], moved) < 0.02 * nearest
+
+
+def test_the_bound_is_below_the_distance(vectors):
+    rng = np.random.default_rng(3)
+    real = np.float32(list(vectors.values()))
+    noisy = real.copy()
+    noisy[:, : rigid.HEAD] *= rng.uniform(0.8, 1.2, noisy[:, : rigid.HEAD].shape)
+    noisy[:, rigid.HEAD :] = np.clip(
+        noisy[:, rigid.HEAD :] + rng.integers(-30, 30, (len(real), lf.LENGTH)), 0, 255
+    )
+    rows = np.vstack([real, noisy])
+    exact = rigid.rigid_distances(rows, rows, l1_numpy)
+    bounds = rigid.rigid_bounds(rows, rows, l1_numpy)
+    assert np.all(bounds <= np.float32(exact)) and np.all(np.diag(exact) == 0)
+    np.testing.assert_allclose(exact, exact.T, rtol=1e-6)
+    assert bounds[exact > 0].mean() > 0.3 * exact[exact > 0].mean()  # bounds that prune
+
+
+def _signature(vector: np.ndarray, seed: int) -> Signature:
+    return Signature(
+        vector=vector, phi=None, n_vertices=3, n_faces=1, n_components=1,
+        curvature_error=float("nan"), repairs=(), route="clean", seconds=0.0,
+        sha256=f"{seed:064d}",
+    )  # fmt: skip
+
+
+def test_search_equals_a_full_scan(tmp_path, vectors):
+    """Rows near a few shapes, duplicates among them (ties), in two segments with a row
+    superseded: the bounded search returns the full scan's rows and distances."""
+    rng = np.random.default_rng(7)
+    base = np.float32(list(vectors.values()))
+    rows = []
+    for i in range(30):
+        row = base[i % 4].copy()
+        row[: rigid.HEAD] *= rng.uniform(0.9, 1.1, rigid.HEAD)
+        row[rigid.HEAD :] = np.clip(row[rigid.HEAD :] + rng.integers(-40, 40, lf.LENGTH), 0, 255)
+        rows.append(row)
+    rows[5] = rows[9] = rows[2]
+    layout = Layout(rigid.LENGTH)
+    path = tmp_path / "index"
+    for first, last in ((0, 18), (18, 30)):
+        with IndexWriter(path, RIGID, layout) as writer:
+            for i in range(first, last):
+                writer.add(Entry(f"c/{i}.off", "c", f"/c/{i}.off"), _signature(rows[i], i))
+    with IndexWriter(path, RIGID, layout) as writer:  # supersede row 3
+        rows[3] = base[1]
+        writer.add(Entry("c/3.off", "c", "/c/3.off"), _signature(rows[3], 99))
+    queries = np.float32([rows[2], base[0], base[3], rows[20]])
+    full = distances("rigid", queries, np.array(rows))
+    with IndexReader(path) as reader:
+        names = list(reader.column("names"))
+        order = [int(n.split("/")[1].split(".")[0]) for n in names]
+        for k in (1, 3, 7):
+            found, dist = nearest_by(reader, queries, k, rigid.DESCRIPTOR.distance)
+            for j in range(len(queries)):
+                scan = full[j, order]
+                expected = np.lexsort((np.arange(len(order)), scan))[:k]
+                np.testing.assert_array_equal(found[j], expected)
+                np.testing.assert_array_equal(dist[j], np.float32(scan[expected]))
+        hits = query(reader, queries[:1], 3)[0]
+        assert [h.distance for h in hits] == [0.0, 0.0, 0.0]
+
+
+def test_the_command_line_computes_indexes_queries_evaluates_and_checks(tmp_path):
+    meshes = {
+        "round/a.off": icosphere(2),
+        "round/b.off": (icosphere(2)[0] * [1.0, 1.1, 0.9], icosphere(2)[1]),
+        "long/a.off": capsule(length=2.0),
+        "long/b.off": capsule(length=2.2, bend=0.2),
+    }
+    for name, (v, f) in meshes.items():
+        write_off(tmp_path / "data" / name, v, f)
+    runner = CliRunner()
+    one = str(tmp_path / "data/long/a.off")
+    out = runner.invoke(main, ["compute", one, "--descriptor", "rigid", "--save", str(tmp_path)])
+    assert out.exit_code == 0, out.output
+    assert np.load(tmp_path / "a.npz")["signature"].shape == (rigid.LENGTH,)
+    index = str(tmp_path / "index")
+    args = ["index", str(tmp_path / "data"), "-o", index, "--descriptor", "rigid"]
+    out = runner.invoke(main, args)
+    assert out.exit_code == 0, out.output
+    out = runner.invoke(main, ["query", index, one, "-k", "2"])
+    assert out.exit_code == 0, out.output
+    lines = out.output.splitlines()
+    assert lines[1].split()[1:] == ["0.0000", "long/a.off", "long"]
+    assert lines[2].split()[3] == "long"
+    out = runner.invoke(main, ["evaluate", "--index", index, "--json"])
+    assert out.exit_code == 0, out.output
+    assert '"NN": 1.0' in out.output
+    out = runner.invoke(main, ["check", index])
+    assert out.exit_code == 0 and "healthy (4 entries" in out.output
+
+
+def test_signature_goes_through_the_repair_stage():
+    """An open tube is repaired before it is measured, and measured like its repaired self."""
+    v, f = open_cylinder()
+    sig = compute_signature(clean_mesh(v, f), RIGID)
+    assert sig.route != "clean" and sig.phi is None
+    assert sig.vector.shape == (rigid.LENGTH,) and np.isfinite(sig.vector).all()
+    assert np.array_equal(sig.vector[rigid.HEAD :], np.round(sig.vector[rigid.HEAD :]))
+
