@@ -238,3 +238,15 @@ def test_signature_goes_through_the_repair_stage():
     v, f = capsule()
     sig = compute_signature(clean_mesh(v, f), LF)
     assert sig.vector.shape == (lf.LENGTH,) and sig.route == "clean" and sig.phi is None
+
+
+def test_fewer_light_fields_are_the_first_ones(vectors):
+    """The features of the first light fields are those the full vector begins with, and their
+    distance is that of the full vectors' first light fields, bounded as the full one is."""
+    v, f = MESHES["limbs3"]()
+    first = lf.light_field_features(clean_mesh(v, f), 3)
+    np.testing.assert_array_equal(first, vectors["limbs3"][: len(first)])
+    rows = np.float32([vectors[name][: len(first)] for name in MESHES])
+    exact = lf.lf_distances(rows, rows, l1_numpy)
+    full = lf.lf_distances(*(2 * [np.float32(list(vectors.values()))]), l1_numpy)
+    assert np.all(lf.lf_bounds(rows, rows, l1_numpy) <= exact) and np.all(exact >= full)

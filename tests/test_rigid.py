@@ -18,6 +18,7 @@ from cfsig.search.nearest import distances, nearest_by, query
 from tests.helpers import icosphere, open_cylinder, random_rotation, write_off
 
 RIGID = Params(descriptor="rigid")
+TAIL = rigid.LENGTH - rigid.HEAD  # the light field features
 MESHES = {
     "limbs3": lambda: limbed_body(3, pose=1),
     "limbs5": lambda: limbed_body(5, pose=2),
@@ -45,13 +46,15 @@ def _nearest_other(vectors, name):
 
 def test_the_distance_weighs_the_channels_of_the_three_descriptors():
     """The distance of two meshes is the sum over the five channels of each one's distance, as
-    its own descriptor measures it, times its weight over its median."""
+    its own descriptor measures it (``lf``'s on the first light fields), times its weight over
+    its median."""
     meshes = [clean_mesh(*make()) for make in (MESHES["limbs3"], MESHES["capsule"])]
     parts = {
         name: [descriptors.get(name).compute(m, Params(descriptor=name), None, "auto").vector
                for m in meshes]
-        for name in ("intrinsic", "sh", "lf")
+        for name in ("intrinsic", "sh")
     }  # fmt: skip
+    parts["lf"] = [lf.light_field_features(m, rigid.FIELDS) for m in meshes]
     cut = (intrinsic.EIGENPAIRS, intrinsic.EIGENPAIRS + intrinsic.QUANTILES * len(intrinsic.TIMES))
     a, b = parts["intrinsic"]
     channel = {
@@ -92,7 +95,7 @@ def test_the_bound_is_below_the_distance(vectors):
     noisy = real.copy()
     noisy[:, : rigid.HEAD] *= rng.uniform(0.8, 1.2, noisy[:, : rigid.HEAD].shape)
     noisy[:, rigid.HEAD :] = np.clip(
-        noisy[:, rigid.HEAD :] + rng.integers(-30, 30, (len(real), lf.LENGTH)), 0, 255
+        noisy[:, rigid.HEAD :] + rng.integers(-30, 30, (len(real), TAIL)), 0, 255
     )
     rows = np.vstack([real, noisy])
     exact = rigid.rigid_distances(rows, rows, l1_numpy)
@@ -119,7 +122,7 @@ def test_search_equals_a_full_scan(tmp_path, vectors):
     for i in range(30):
         row = base[i % 4].copy()
         row[: rigid.HEAD] *= rng.uniform(0.9, 1.1, rigid.HEAD)
-        row[rigid.HEAD :] = np.clip(row[rigid.HEAD :] + rng.integers(-40, 40, lf.LENGTH), 0, 255)
+        row[rigid.HEAD :] = np.clip(row[rigid.HEAD :] + rng.integers(-40, 40, TAIL), 0, 255)
         rows.append(row)
     rows[5] = rows[9] = rows[2]
     layout = Layout(rigid.LENGTH)
@@ -184,4 +187,3 @@ def test_signature_goes_through_the_repair_stage():
     assert sig.route != "clean" and sig.phi is None
     assert sig.vector.shape == (rigid.LENGTH,) and np.isfinite(sig.vector).all()
     assert np.array_equal(sig.vector[rigid.HEAD :], np.round(sig.vector[rigid.HEAD :]))
-

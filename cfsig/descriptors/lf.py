@@ -451,12 +451,12 @@ class Views(NamedTuple):
 
     Attributes
     ----------
-    images : (IMAGES, GRID, GRID) bool
+    images : (fields * VIEWS, GRID, GRID) bool
         View v (light field ``v // VIEWS``), the grid spanning [-1, 1] about the centre of the
         projection's bounding box and fitted to it.
-    centres : (IMAGES, 2) float64
+    centres : (fields * VIEWS, 2) float64
         Each silhouette's centroid, in the grid's units.
-    radii : (IMAGES,) float64
+    radii : (fields * VIEWS,) float64
         The largest distance of a vertex from its silhouette's centroid over the views of its
         light field, in each grid's units.
     """
@@ -466,8 +466,8 @@ class Views(NamedTuple):
     radii: np.ndarray
 
 
-def silhouettes(vertices: np.ndarray, faces: np.ndarray) -> Views:
-    """The silhouettes of a mesh in every view of its light fields.
+def silhouettes(vertices: np.ndarray, faces: np.ndarray, fields: int = LIGHT_FIELDS) -> Views:
+    """The silhouettes of a mesh in every view of its first light fields.
 
     When the triangles form oriented surfaces without boundary (`closed_and_oriented`), each
     view draws only the triangles that face one way along it: every line of sight through such
@@ -479,12 +479,15 @@ def silhouettes(vertices: np.ndarray, faces: np.ndarray) -> Views:
         Vertex positions.
     faces : (m, 3) int64
         Triangles.
+    fields : int
+        The light fields drawn, the first of `light_field_rotations` [all `LIGHT_FIELDS`].
 
     Returns
     -------
     views : Views
     """
-    frames = view_frames()
+    images = fields * VIEWS
+    frames = view_frames()[:images]
     projected = np.einsum("nk,vkj->vnj", vertices, frames)  # (views, n, 2)
     low, high = projected.min(axis=1), projected.max(axis=1)
     middle = (low + high) / 2
@@ -497,18 +500,18 @@ def silhouettes(vertices: np.ndarray, faces: np.ndarray) -> Views:
         directions = np.cross(frames[:, :, 0], frames[:, :, 1])
         view, face = np.nonzero(directions @ normals.T > 0)
     else:
-        view, face = np.divmod(np.arange(IMAGES * len(faces)), len(faces))
+        view, face = np.divmod(np.arange(images * len(faces)), len(faces))
     corners = pixels.astype(np.float32)[view[:, None], faces[face]]
-    images = rasterise(corners, view, IMAGES, GRID)
-    flat = images.reshape(IMAGES, -1)
+    filled = rasterise(corners, view, images, GRID)
+    flat = filled.reshape(images, -1)
     area = flat.sum(axis=1)
     first = monomials(GRID)[:, 1:3]  # x and y
     centres = np.divide(
-        flat @ first, area[:, None], out=np.zeros((IMAGES, 2)), where=area[:, None] > 0
+        flat @ first, area[:, None], out=np.zeros((images, 2)), where=area[:, None] > 0
     )
     reach = np.sqrt(((projected - centres[:, None, :]) ** 2).sum(axis=2).max(axis=1)) * half
-    radii = reach.reshape(LIGHT_FIELDS, VIEWS).max(axis=1).repeat(VIEWS) / half
-    return Views(images, centres, radii)
+    radii = reach.reshape(fields, VIEWS).max(axis=1).repeat(VIEWS) / half
+    return Views(filled, centres, radii)
 
 
 def quantise(values: np.ndarray, scale: float = 1.0) -> np.ndarray:
@@ -539,7 +542,7 @@ def image_features(views: Views) -> np.ndarray:
 
     Returns
     -------
-    features : (IMAGES, FEATURES) float64
+    features : (len(views.images), FEATURES) float64
         Whole numbers in [0, 255].
     """
     zernike = quantise(zernike_magnitudes(*views))
@@ -567,9 +570,27 @@ def lf_vector(mesh: Mesh, params: Params, cf: ConformalFactor | None, solver: st
         ``vector``: (LENGTH,) float64, `image_features` of `silhouettes`, light field by light
         field, view by view; no cells nor operators.
     """
+    return Computed(light_field_features(mesh), None, None)
+
+
+def light_field_features(mesh: Mesh, fields: int = LIGHT_FIELDS) -> np.ndarray:
+    """The features of a mesh's silhouettes in its first light fields.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The repaired mesh.
+    fields : int
+        Light fields, the first of `light_field_rotations` [all `LIGHT_FIELDS`].
+
+    Returns
+    -------
+    features : (fields * VIEWS * FEATURES,) float64
+        `image_features` of `silhouettes` of a copy simplified to `FACE_LIMIT` faces, light
+        field by light field, view by view.
+    """
     vertices, faces = decimate(mesh.vertices, mesh.faces, FACE_LIMIT)
-    features = image_features(silhouettes(vertices, faces))
-    return Computed(features.ravel(), None, None)
+    return image_features(silhouettes(vertices, faces, fields)).ravel()
 
 
 @lru_cache(maxsize=1)
@@ -589,10 +610,11 @@ def lf_distances(queries: np.ndarray, rows: np.ndarray, l1: L1Kernel) -> np.ndar
 
     Parameters
     ----------
-    queries : (q, LENGTH) float32, C-contiguous
-        Signatures (`lf_vector`).
-    rows : (m, LENGTH) float32, C-contiguous
-        Signatures to compare with.
+    queries : (q, length) float32, C-contiguous
+        Signatures (`lf_vector`, or `light_field_features` of fewer light fields: ``length``
+        is their number times ``VIEWS * FEATURES``).
+    rows : (m, length) float32, C-contiguous
+        Signatures to compare with, of as many light fields.
     l1 : callable
         ``l1(a, b, out)`` fills ``out[i, j]`` with the L1 distance of rows ``a[i]`` and
         ``b[j]`` (`cfsig.search.l1`).
@@ -600,21 +622,24 @@ def lf_distances(queries: np.ndarray, rows: np.ndarray, l1: L1Kernel) -> np.ndar
     Returns
     -------
     distances : (q, m) float64
-        The smallest, over the 10 x 10 pairs of light fields and the 60 rotations of the
-        dodecahedron, of the sum of the L1 distances of the paired silhouettes' features.
+        The smallest, over the pairs of light fields (10 x 10 for `lf_vector`) and the 60
+        rotations of the dodecahedron, of the sum of the L1 distances of the paired
+        silhouettes' features.
     """
     out = np.empty((len(queries), len(rows)))
     sums = _rotation_sums()
     images = rows.reshape(-1, FEATURES)
+    fields = queries.shape[1] // (VIEWS * FEATURES)
+    per_row = fields * VIEWS
     for j, query in enumerate(queries):
         mine = query.reshape(-1, FEATURES)
         for first in range(0, len(rows), _ROW_CHUNK):
-            some = images[first * IMAGES : (first + _ROW_CHUNK) * IMAGES]
+            some = images[first * per_row : (first + _ROW_CHUNK) * per_row]
             pairs = np.empty((len(mine), len(some)), np.float32)
             l1(mine, some, pairs)
-            count = len(some) // IMAGES
+            count = len(some) // per_row
             # (query field, view a, row, row field, view b) -> (row, fields, fields, a * b)
-            pairs = pairs.reshape(LIGHT_FIELDS, VIEWS, count, LIGHT_FIELDS, VIEWS)
+            pairs = pairs.reshape(fields, VIEWS, count, fields, VIEWS)
             pairs = pairs.transpose(2, 0, 3, 1, 4).reshape(-1, VIEWS * VIEWS)
             best = (pairs @ sums).reshape(count, -1).min(axis=1)
             out[j, first : first + count] = best
@@ -630,13 +655,13 @@ def field_summaries(signatures: np.ndarray) -> np.ndarray:
 
     Parameters
     ----------
-    signatures : (k, LENGTH) float32
-        Signatures (`lf_vector`).
+    signatures : (k, length) float32
+        Signatures of some light fields each (`lf_distances`).
 
     Returns
     -------
-    summaries : (k * LIGHT_FIELDS, VIEWS * FEATURES) float32
-        C-contiguous; row ``i * LIGHT_FIELDS + l`` is light field l of signature i.
+    summaries : (k * fields, VIEWS * FEATURES) float32
+        C-contiguous; row ``i * fields + l`` is light field l of signature i.
     """
     fields = signatures.reshape(-1, VIEWS, FEATURES)
     return np.ascontiguousarray(np.sort(fields, axis=1).reshape(len(fields), -1))
@@ -656,10 +681,10 @@ def lf_bounds(queries: np.ndarray, rows: np.ndarray, l1: L1Kernel) -> np.ndarray
     bounds : (q, m) float64
         At most ``lf_distances(queries, rows, l1)``, entry by entry.
     """
-    pairs = np.empty((len(queries) * LIGHT_FIELDS, len(rows) * LIGHT_FIELDS), np.float32)
+    fields = queries.shape[1] // (VIEWS * FEATURES)
+    pairs = np.empty((len(queries) * fields, len(rows) * fields), np.float32)
     l1(field_summaries(queries), field_summaries(rows), pairs)
-    fields = pairs.reshape(len(queries), LIGHT_FIELDS, len(rows), LIGHT_FIELDS)
-    return fields.min(axis=(1, 3)).astype(np.float64)
+    return pairs.reshape(len(queries), fields, len(rows), fields).min(axis=(1, 3)).astype(float)
 
 
 DESCRIPTOR = Descriptor(

@@ -7,7 +7,9 @@ The vector holds, computed on the repaired mesh by those descriptors' own functi
 - the ``intrinsic`` vector (`cfsig.descriptors.intrinsic.intrinsic_vector`), its three channels
   (spectrum, heat, curvature) each multiplied by its weight in `WEIGHTS` over `MEDIANS`;
 - the ``sh`` vector (`cfsig.descriptors.sh.sh_vector`), multiplied likewise;
-- the ``lf`` vector (`cfsig.descriptors.lf.lf_vector`) as it is, whole numbers in [0, 255].
+- the light field features of ``lf`` (`cfsig.descriptors.lf.light_field_features`) in its
+  first `FIELDS` light fields rather than all 10, for the cost (docs/method.md), as they are:
+  whole numbers in [0, 255].
 
 The distance of two meshes (`rigid_distances`) is the L1 distance of the first two parts plus
 the light field distance of the third (`cfsig.descriptors.lf.lf_distances`) times its weight
@@ -38,8 +40,9 @@ MEDIANS = {"spectrum": 1.0, "heat": 1.0, "curvature": 1.0, "sh": 1.0, "lf": 1.0}
 WEIGHTS = {"spectrum": 1.0, "heat": 1.0, "curvature": 1.0, "sh": 1.0, "lf": 1.0}
 _SPECTRUM_END = intrinsic.EIGENPAIRS
 _HEAT_END = _SPECTRUM_END + intrinsic.QUANTILES * len(intrinsic.TIMES)
-HEAD = intrinsic.LENGTH + sh.LENGTH  # the entries compared by L1; the lf vector follows
-LENGTH = HEAD + lf.LENGTH
+FIELDS = 3  # light fields drawn (docs/method.md)
+HEAD = intrinsic.LENGTH + sh.LENGTH  # the entries compared by L1; the light field features follow
+LENGTH = HEAD + FIELDS * lf.VIEWS * lf.FEATURES
 # The bound's margin below the distance: the L1 part of the two is summed in float32 by kernels
 # that may group the terms differently, and searches round the distance to float32.
 _BOUND_MARGIN = 1e-5
@@ -101,7 +104,8 @@ def rigid_vector(mesh: Mesh, params: Params, cf: ConformalFactor | None, solver:
     -------
     computed : Computed
         ``vector``: (LENGTH,) float64, the weighed ``intrinsic`` and ``sh`` vectors, then the
-        ``lf`` vector; no cells; the operators ``intrinsic`` built on the mesh itself, if any.
+        light field features; no cells; the operators ``intrinsic`` built on the mesh itself,
+        if any.
 
     Raises
     ------
@@ -110,7 +114,7 @@ def rigid_vector(mesh: Mesh, params: Params, cf: ConformalFactor | None, solver:
     """
     inner = intrinsic.intrinsic_vector(mesh, params, cf, solver)
     outer = sh.sh_vector(mesh, params, None, solver).vector
-    views = lf.lf_vector(mesh, params, None, solver).vector
+    views = lf.light_field_features(mesh, FIELDS)
     head = np.concatenate([inner.vector, outer]) * head_factors()
     return Computed(np.concatenate([head, views]), None, inner.operators)
 
@@ -118,7 +122,8 @@ def rigid_vector(mesh: Mesh, params: Params, cf: ConformalFactor | None, solver:
 def _parts(
     queries: np.ndarray, rows: np.ndarray, l1: L1Kernel
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The L1 distances of the heads (q, m) float64, and the lf parts of both, C-contiguous."""
+    """The L1 distances of the heads (q, m) float64, and the light field features of both,
+    C-contiguous."""
     head = np.empty((len(queries), len(rows)), np.float32)
     l1(np.ascontiguousarray(queries[:, :HEAD]), np.ascontiguousarray(rows[:, :HEAD]), head)
     tails = (np.ascontiguousarray(queries[:, HEAD:]), np.ascontiguousarray(rows[:, HEAD:]))
@@ -142,7 +147,7 @@ def rigid_distances(queries: np.ndarray, rows: np.ndarray, l1: L1Kernel) -> np.n
     -------
     distances : (q, m) float64
         The L1 distance of the weighed ``intrinsic`` and ``sh`` parts plus the light field
-        distance (`lf.lf_distances`) of the ``lf`` parts times ``scale("lf")``.
+        distance (`lf.lf_distances`) of the light field features times ``scale("lf")``.
     """
     head, mine, theirs = _parts(queries, rows, l1)
     return head + scale("lf") * lf.lf_distances(mine, theirs, l1)
