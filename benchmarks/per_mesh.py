@@ -1,12 +1,12 @@
-"""Seconds per mesh of the two descriptors, end to end, and their ratio in the same run.
+"""Seconds per mesh of each descriptor, end to end, against the default's in the same run.
 
-    python benchmarks/per_mesh.py --data FOLDER [--every K]
+    python benchmarks/per_mesh.py --data FOLDER [--every K] [--descriptors cf,intrinsic,...]
 
 For every mesh ``FOLDER/<class>/<file>.off`` (every k-th in sorted order), in one process with
-one BLAS/OpenMP thread: `cfsig.signature_file` with ``cf`` then with ``intrinsic``, from
+one BLAS/OpenMP thread: `cfsig.signature_file` with each descriptor in turn (default: all), from
 reading the file to the signature, in CPU seconds (``time.process_time``) and wall seconds.
-Prints the medians and the ratio ``intrinsic`` / ``cf`` of the medians, after one warm-up of
-each descriptor on the first mesh (imports and first calls are not per-mesh costs).
+Prints the medians and each one's ratio to the default ``intrinsic``'s median, after one
+warm-up of each descriptor on the first mesh (imports and first calls are not per-mesh costs).
 """
 
 from __future__ import annotations
@@ -24,8 +24,9 @@ import time
 from common import data_arguments, median, meshes, table
 
 import cfsig
+from cfsig.descriptors import NAMES
 
-DESCRIPTORS = ("cf", "intrinsic")
+DEFAULT = cfsig.Params().descriptor
 
 
 def timed(path, params: cfsig.Params) -> tuple[float, float]:
@@ -39,21 +40,22 @@ def main() -> None:
     """Time every mesh with each descriptor and print the medians and the ratio."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     data_arguments(parser)
+    parser.add_argument("--descriptors", default=",".join(NAMES), help="comma-separated")
     args = parser.parse_args()
     files = meshes(args.data, args.every)
-    params = {d: cfsig.Params(descriptor=d) for d in DESCRIPTORS}
+    names = list(dict.fromkeys([DEFAULT, *args.descriptors.split(",")]))
+    params = {d: cfsig.Params(descriptor=d) for d in names}
     for p in params.values():
         timed(files[0], p)
     times = {d: [timed(path, p) for path in files] for d, p in params.items()}
     cpu = {d: median([c for c, _ in t]) for d, t in times.items()}
     wall = {d: median([w for _, w in t]) for d, t in times.items()}
     print(f"{len(files)} meshes from {args.data}, one thread, medians:\n")
-    rows = [[f"`{d}`", f"{cpu[d]:.4f}", f"{wall[d]:.4f}"] for d in DESCRIPTORS]
-    rows.append(
-        ["`intrinsic` / `cf`", f"{cpu['intrinsic'] / cpu['cf']:.2f}",
-         f"{wall['intrinsic'] / wall['cf']:.2f}"]
-    )  # fmt: skip
-    print(table(["descriptor", "CPU s per mesh", "wall s per mesh"], rows))
+    rows = [
+        [f"`{d}`", f"{cpu[d]:.4f}", f"{wall[d]:.4f}", f"{wall[d] / wall[DEFAULT]:.2f}"]
+        for d in names
+    ]
+    print(table(["descriptor", "CPU s per mesh", "wall s per mesh", f"wall / `{DEFAULT}`"], rows))
 
 
 if __name__ == "__main__":
