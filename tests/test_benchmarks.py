@@ -65,10 +65,11 @@ def test_partial_speed(tmp_path):
 
 
 def test_per_mesh(data):
-    out = run("per_mesh.py", "--data", data / "shrec07", "--every", 2)
-    assert "| descriptor | CPU s per mesh | wall s per mesh |" in out
-    assert re.search(rf"\| `cf` \| {NUMBER} \| {NUMBER} \|", out)
-    assert re.search(rf"\| `intrinsic` / `cf` \| {NUMBER} \| {NUMBER} \|", out)
+    args = ["--data", data / "shrec07", "--every", 2, "--descriptors", "cf", "--repeat", 1]
+    out = run("per_mesh.py", *args)
+    assert "| descriptor | CPU | wall | wall / `intrinsic` | whole run | ratio |" in out
+    assert re.search(rf"\| `intrinsic` \| {NUMBER} \| {NUMBER} \| 1.00 \| {NUMBER} \| 1.00 \|", out)
+    assert re.search(rf"\| `cf` \|( {NUMBER} \|){{5}}", out)
 
 
 def test_messy(data, tmp_path):
