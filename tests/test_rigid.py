@@ -45,7 +45,7 @@ def _nearest_other(vectors, name):
 
 
 def test_the_distance_weighs_the_channels_of_the_three_descriptors():
-    """The distance of two meshes is the sum over the five channels of each one's distance, as
+    """The distance of two meshes is the sum over the four channels of each one's distance, as
     its own descriptor measures it (``lf``'s on the first light fields), times its weight over
     its median."""
     meshes = [clean_mesh(*make()) for make in (MESHES["limbs3"], MESHES["capsule"])]
@@ -58,7 +58,6 @@ def test_the_distance_weighs_the_channels_of_the_three_descriptors():
     cut = (intrinsic.EIGENPAIRS, intrinsic.EIGENPAIRS + intrinsic.QUANTILES * len(intrinsic.TIMES))
     a, b = parts["intrinsic"]
     channel = {
-        "spectrum": np.abs(a[: cut[0]] - b[: cut[0]]).sum(),
         "heat": np.abs(a[cut[0] : cut[1]] - b[cut[0] : cut[1]]).sum(),
         "curvature": np.abs(a[cut[1] :] - b[cut[1] :]).sum(),
         "sh": np.abs(parts["sh"][0] - parts["sh"][1]).sum(),
@@ -73,10 +72,11 @@ def test_the_distance_weighs_the_channels_of_the_three_descriptors():
 
 @pytest.mark.parametrize("name", sorted(MESHES))
 def test_rotation_invariance(vectors, name):
-    """A rotated shape lies far nearer its unrotated self than any other shape does."""
+    """A rotated shape lies nearer its unrotated self than half its distance to any other: the
+    light fields, three of them only, see it from other directions (docs/method.md)."""
     v, f = MESHES[name]()
     turned = _vector(v @ random_rotation(len(name)).T, f)
-    assert _distance(vectors[name], turned) < 0.3 * _nearest_other(vectors, name)
+    assert _distance(vectors[name], turned) < 0.5 * _nearest_other(vectors, name)
 
 
 def test_translation_and_scale_invariance(vectors):

@@ -4,8 +4,9 @@ extrinsic shape that the light field descriptor ``lf`` and the spherical harmoni
 
 The vector holds, computed on the repaired mesh by those descriptors' own functions:
 
-- the ``intrinsic`` vector (`cfsig.descriptors.intrinsic.intrinsic_vector`), its three channels
-  (spectrum, heat, curvature) each multiplied by its weight in `WEIGHTS` over `MEDIANS`;
+- the heat and curvature channels of the ``intrinsic`` vector
+  (`cfsig.descriptors.intrinsic.intrinsic_vector`), each multiplied by its weight in `WEIGHTS`
+  over its median in `MEDIANS` (the spectrum's weight came out 0: its entries are left out);
 - the ``sh`` vector (`cfsig.descriptors.sh.sh_vector`), multiplied likewise;
 - the light field features of ``lf`` (`cfsig.descriptors.lf.light_field_features`) in its
   first `FIELDS` light fields rather than all 10, for the cost (docs/method.md), as they are:
@@ -13,7 +14,7 @@ The vector holds, computed on the repaired mesh by those descriptors' own functi
 
 The distance of two meshes (`rigid_distances`) is the L1 distance of the first two parts plus
 the light field distance of the third (`cfsig.descriptors.lf.lf_distances`) times its weight
-over its median: a weighted sum of the five channels' distances, each divided by its median
+over its median: a weighted sum of the four channels' distances, each divided by its median
 distance over the pairs of the Princeton Shape Benchmark's training models, so that a weight
 tells how much its channel counts. The weights are those of the largest first tier on that
 collection (docs/method.md). `rigid_bounds` replaces the light field distance by its lower
@@ -32,16 +33,16 @@ from cfsig.files.mesh import Mesh
 from cfsig.operators.conformal import ConformalFactor
 from cfsig.params import Layout, Params
 
-CHANNELS = ("spectrum", "heat", "curvature", "sh", "lf")
+CHANNELS = ("heat", "curvature", "sh", "lf")
 # Each channel's median distance over the pairs of PSB-train's models: the L1 distance of its
 # part of the ``intrinsic`` or ``sh`` vector, or ``lf``'s own distance (docs/method.md).
-MEDIANS = {"spectrum": 1.0, "heat": 1.0, "curvature": 1.0, "sh": 1.0, "lf": 1.0}
+MEDIANS = {"heat": 3.1748, "curvature": 2.0402, "sh": 57.1113, "lf": 4991.0}
 # Each channel's weight, chosen by the first tier on PSB-train (docs/method.md).
-WEIGHTS = {"spectrum": 1.0, "heat": 1.0, "curvature": 1.0, "sh": 1.0, "lf": 1.0}
-_SPECTRUM_END = intrinsic.EIGENPAIRS
-_HEAT_END = _SPECTRUM_END + intrinsic.QUANTILES * len(intrinsic.TIMES)
+WEIGHTS = {"heat": 0.125, "curvature": 0.177, "sh": 0.841, "lf": 1.0}
 FIELDS = 3  # light fields drawn (docs/method.md)
-HEAD = intrinsic.LENGTH + sh.LENGTH  # the entries compared by L1; the light field features follow
+_HEAT = intrinsic.QUANTILES * len(intrinsic.TIMES)  # entries of the heat channel
+_KEPT = intrinsic.LENGTH - intrinsic.EIGENPAIRS  # the heat and curvature entries of intrinsic
+HEAD = _KEPT + sh.LENGTH  # the entries compared by L1; the light field features follow
 LENGTH = HEAD + FIELDS * lf.VIEWS * lf.FEATURES
 # The bound's margin below the distance: the L1 part of the two is summed in float32 by kernels
 # that may group the terms differently, and searches round the distance to float32.
@@ -66,20 +67,15 @@ def scale(channel: str) -> float:
 
 @lru_cache(maxsize=1)
 def head_factors() -> np.ndarray:
-    """The factor of each entry of the ``intrinsic`` and ``sh`` vectors in the rigid vector;
-    cached.
+    """The factor of each entry of the ``intrinsic`` vector's heat and curvature and of the
+    ``sh`` vector in the rigid vector; cached.
 
     Returns
     -------
     factors : (HEAD,) float64
         Read-only: `scale` of the channel each entry belongs to.
     """
-    sizes = {
-        "spectrum": _SPECTRUM_END,
-        "heat": _HEAT_END - _SPECTRUM_END,
-        "curvature": intrinsic.LENGTH - _HEAT_END,
-        "sh": sh.LENGTH,
-    }
+    sizes = {"heat": _HEAT, "curvature": _KEPT - _HEAT, "sh": sh.LENGTH}
     factors = np.concatenate([np.full(size, scale(name)) for name, size in sizes.items()])
     factors.flags.writeable = False
     return factors
@@ -103,9 +99,9 @@ def rigid_vector(mesh: Mesh, params: Params, cf: ConformalFactor | None, solver:
     Returns
     -------
     computed : Computed
-        ``vector``: (LENGTH,) float64, the weighed ``intrinsic`` and ``sh`` vectors, then the
-        light field features; no cells; the operators ``intrinsic`` built on the mesh itself,
-        if any.
+        ``vector``: (LENGTH,) float64, the weighed heat and curvature of ``intrinsic`` and
+        ``sh`` vector, then the light field features; no cells; the operators ``intrinsic``
+        built on the mesh itself, if any.
 
     Raises
     ------
@@ -115,7 +111,7 @@ def rigid_vector(mesh: Mesh, params: Params, cf: ConformalFactor | None, solver:
     inner = intrinsic.intrinsic_vector(mesh, params, cf, solver)
     outer = sh.sh_vector(mesh, params, None, solver).vector
     views = lf.light_field_features(mesh, FIELDS)
-    head = np.concatenate([inner.vector, outer]) * head_factors()
+    head = np.concatenate([inner.vector[intrinsic.EIGENPAIRS :], outer]) * head_factors()
     return Computed(np.concatenate([head, views]), None, inner.operators)
 
 
