@@ -45,9 +45,9 @@ def _nearest_other(vectors, name):
 
 
 def test_the_distance_weighs_the_channels_of_the_three_descriptors():
-    """The distance of two meshes is the sum over the four channels of each one's distance, as
-    its own descriptor measures it (``lf``'s on the first light fields), times its weight over
-    its median."""
+    """The distance of two meshes sums over the four channels each one's distance, as its own
+    descriptor measures it (``lf``'s on the first light fields), over its median, to the power,
+    times its weight."""
     meshes = [clean_mesh(*make()) for make in (MESHES["limbs3"], MESHES["capsule"])]
     parts = {
         name: [descriptors.get(name).compute(m, Params(descriptor=name), None, "auto").vector
@@ -63,7 +63,10 @@ def test_the_distance_weighs_the_channels_of_the_three_descriptors():
         "sh": np.abs(parts["sh"][0] - parts["sh"][1]).sum(),
         "lf": lf.lf_distances(*(np.float32([v]) for v in parts["lf"]), l1_numpy)[0, 0],
     }
-    expected = sum(rigid.scale(name) * value for name, value in channel.items())
+    expected = sum(
+        rigid.WEIGHTS[name] * (value / rigid.MEDIANS[name]) ** rigid.POWER
+        for name, value in channel.items()
+    )
     found = [rigid.rigid_vector(m, RIGID, None, "auto").vector for m in meshes]
     assert found[0].shape == (rigid.LENGTH,) == (descriptors.layout(RIGID).length,)
     assert _distance(*found) == pytest.approx(expected, rel=1e-5)
@@ -72,21 +75,22 @@ def test_the_distance_weighs_the_channels_of_the_three_descriptors():
 
 @pytest.mark.parametrize("name", sorted(MESHES))
 def test_rotation_invariance(vectors, name):
-    """A rotated shape lies nearer its unrotated self than half its distance to any other: the
-    light fields, three of them only, see it from other directions (docs/method.md)."""
+    """A rotated shape lies nearer its unrotated self than any other shape does, not much: the
+    light fields, three of them only, see it from other directions, and the power of the
+    distance (0.3) lifts small differences (docs/method.md)."""
     v, f = MESHES[name]()
     turned = _vector(v @ random_rotation(len(name)).T, f)
-    assert _distance(vectors[name], turned) < 0.5 * _nearest_other(vectors, name)
+    assert _distance(vectors[name], turned) < _nearest_other(vectors, name)
 
 
 def test_translation_and_scale_invariance(vectors):
-    """Moved and scaled, a shape stays within 2% of its distance to any other: only round-off
-    (a pixel of a silhouette, a feature's last quantum) moves it."""
+    """Moved and scaled, a shape stays within half its distance to any other: only round-off (a
+    pixel of a silhouette, a feature's last quantum) moves it, lifted by the power 0.3."""
     v, f = MESHES["limbs3"]()
     nearest = _nearest_other(vectors, "limbs3")
     for factor, shift in ((0.01, [3.0, -1.0, 2.0]), (250.0, [-40.0, 7.0, 0.5])):
         moved = _vector(v * factor + shift, f)
-        assert _distance(vectors["limbs3"], moved) < 0.02 * nearest
+        assert _distance(vectors["limbs3"], moved) < 0.5 * nearest
 
 
 def test_the_bound_is_below_the_distance(vectors):

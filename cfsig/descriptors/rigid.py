@@ -5,20 +5,21 @@ extrinsic shape that the light field descriptor ``lf`` and the spherical harmoni
 The vector holds, computed on the repaired mesh by those descriptors' own functions:
 
 - the heat and curvature channels of the ``intrinsic`` vector
-  (`cfsig.descriptors.intrinsic.intrinsic_vector`), each multiplied by its weight in `WEIGHTS`
-  over its median in `MEDIANS` (the spectrum's weight came out 0: its entries are left out);
-- the ``sh`` vector (`cfsig.descriptors.sh.sh_vector`), multiplied likewise;
+  (`cfsig.descriptors.intrinsic.intrinsic_vector`), each divided by its median in `MEDIANS`
+  (the spectrum's best weight was 0: its entries are left out);
+- the ``sh`` vector (`cfsig.descriptors.sh.sh_vector`), divided likewise;
 - the light field features of ``lf`` (`cfsig.descriptors.lf.light_field_features`) in its
-  first `FIELDS` light fields rather than all 10, for the cost (docs/method.md), as they are:
-  whole numbers in [0, 255].
+  first `FIELDS` light fields rather than all 10, for the cost, as they are: whole numbers in
+  [0, 255].
 
-The distance of two meshes (`rigid_distances`) is the L1 distance of the first two parts plus
-the light field distance of the third (`cfsig.descriptors.lf.lf_distances`) times its weight
-over its median: a weighted sum of the four channels' distances, each divided by its median
-distance over the pairs of the Princeton Shape Benchmark's training models, so that a weight
-tells how much its channel counts. The weights are those of the largest first tier on that
-collection (docs/method.md). `rigid_bounds` replaces the light field distance by its lower
-bound (`cfsig.descriptors.lf.lf_bounds`), so that searches keep their candidates by it.
+The distance of two meshes (`rigid_distances`) is ``sum_c WEIGHTS[c] * (d_c / m_c) ** POWER``
+over the four channels: d_c the channel's distance (the L1 distance of its entries, the light
+field distance `cfsig.descriptors.lf.lf_distances` for ``lf``), m_c its median distance over
+the pairs of the Princeton Shape Benchmark's training models. The power, below 1, keeps one
+channel's large disagreement from outweighing the others' agreement. Power and weights are
+those of the largest first tier on that collection (docs/method.md). `rigid_bounds` puts the
+light field distance's lower bound (`cfsig.descriptors.lf.lf_bounds`) in its place, so that
+searches keep their candidates by it.
 """
 
 from __future__ import annotations
@@ -36,47 +37,36 @@ from cfsig.params import Layout, Params
 CHANNELS = ("heat", "curvature", "sh", "lf")
 # Each channel's median distance over the pairs of PSB-train's models: the L1 distance of its
 # part of the ``intrinsic`` or ``sh`` vector, or ``lf``'s own distance (docs/method.md).
-MEDIANS = {"heat": 3.1748, "curvature": 2.0402, "sh": 57.1113, "lf": 4991.0}
-# Each channel's weight, chosen by the first tier on PSB-train (docs/method.md).
-WEIGHTS = {"heat": 0.125, "curvature": 0.177, "sh": 0.841, "lf": 1.0}
+MEDIANS = {"heat": 3.2228, "curvature": 2.0333, "sh": 56.5629, "lf": 5030.0}
+# Each channel's weight, and the power of the normalised distances, chosen by the first tier
+# on PSB-train (docs/method.md).
+WEIGHTS = {"heat": 0.125, "curvature": 0.42, "sh": 0.841, "lf": 1.189}
+POWER = 0.3
 FIELDS = 3  # light fields drawn (docs/method.md)
 _HEAT = intrinsic.QUANTILES * len(intrinsic.TIMES)  # entries of the heat channel
 _KEPT = intrinsic.LENGTH - intrinsic.EIGENPAIRS  # the heat and curvature entries of intrinsic
 HEAD = _KEPT + sh.LENGTH  # the entries compared by L1; the light field features follow
 LENGTH = HEAD + FIELDS * lf.VIEWS * lf.FEATURES
-# The bound's margin below the distance: the L1 part of the two is summed in float32 by kernels
+# The columns of the channels compared by L1.
+COLUMNS = {"heat": (0, _HEAT), "curvature": (_HEAT, _KEPT), "sh": (_KEPT, HEAD)}
+# The bound's margin below the distance: a channel's L1 distance is summed in float32 by kernels
 # that may group the terms differently, and searches round the distance to float32.
 _BOUND_MARGIN = 1e-5
-
-
-def scale(channel: str) -> float:
-    """The factor of a channel's distance in the descriptor's distance.
-
-    Parameters
-    ----------
-    channel : str
-        One of `CHANNELS`.
-
-    Returns
-    -------
-    factor : float
-        Its weight over its median distance.
-    """
-    return WEIGHTS[channel] / MEDIANS[channel]
 
 
 @lru_cache(maxsize=1)
 def head_factors() -> np.ndarray:
     """The factor of each entry of the ``intrinsic`` vector's heat and curvature and of the
-    ``sh`` vector in the rigid vector; cached.
+    ``sh`` vector in the rigid vector: the inverse of its channel's median; cached.
 
     Returns
     -------
     factors : (HEAD,) float64
-        Read-only: `scale` of the channel each entry belongs to.
+        Read-only.
     """
-    sizes = {"heat": _HEAT, "curvature": _KEPT - _HEAT, "sh": sh.LENGTH}
-    factors = np.concatenate([np.full(size, scale(name)) for name, size in sizes.items()])
+    factors = np.concatenate(
+        [np.full(stop - start, 1 / MEDIANS[name]) for name, (start, stop) in COLUMNS.items()]
+    )
     factors.flags.writeable = False
     return factors
 
@@ -99,9 +89,9 @@ def rigid_vector(mesh: Mesh, params: Params, cf: ConformalFactor | None, solver:
     Returns
     -------
     computed : Computed
-        ``vector``: (LENGTH,) float64, the weighed heat and curvature of ``intrinsic`` and
-        ``sh`` vector, then the light field features; no cells; the operators ``intrinsic``
-        built on the mesh itself, if any.
+        ``vector``: (LENGTH,) float64, the heat and curvature of ``intrinsic`` and the ``sh``
+        vector times `head_factors`, then the light field features; no cells; the operators
+        ``intrinsic`` built on the mesh itself, if any.
 
     Raises
     ------
@@ -115,15 +105,24 @@ def rigid_vector(mesh: Mesh, params: Params, cf: ConformalFactor | None, solver:
     return Computed(np.concatenate([head, views]), None, inner.operators)
 
 
-def _parts(
-    queries: np.ndarray, rows: np.ndarray, l1: L1Kernel
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The L1 distances of the heads (q, m) float64, and the light field features of both,
-    C-contiguous."""
-    head = np.empty((len(queries), len(rows)), np.float32)
-    l1(np.ascontiguousarray(queries[:, :HEAD]), np.ascontiguousarray(rows[:, :HEAD]), head)
-    tails = (np.ascontiguousarray(queries[:, HEAD:]), np.ascontiguousarray(rows[:, HEAD:]))
-    return head.astype(np.float64), *tails
+def _weighed(queries: np.ndarray, rows: np.ndarray, l1: L1Kernel, light: np.ndarray) -> np.ndarray:
+    """``sum_c WEIGHTS[c] * (d_c / m_c) ** POWER``, the head channels' from their columns, the
+    light field's from its distance (or bound) ``light`` (q, m)."""
+    total = WEIGHTS["lf"] * (light / MEDIANS["lf"]) ** POWER
+    for name, (start, stop) in COLUMNS.items():
+        part = np.empty((len(queries), len(rows)), np.float32)
+        l1(
+            np.ascontiguousarray(queries[:, start:stop]),
+            np.ascontiguousarray(rows[:, start:stop]),
+            part,
+        )
+        total += WEIGHTS[name] * part.astype(np.float64) ** POWER
+    return total
+
+
+def _light(signatures: np.ndarray) -> np.ndarray:
+    """The light field features of signatures, C-contiguous."""
+    return np.ascontiguousarray(signatures[:, HEAD:])
 
 
 def rigid_distances(queries: np.ndarray, rows: np.ndarray, l1: L1Kernel) -> np.ndarray:
@@ -142,16 +141,17 @@ def rigid_distances(queries: np.ndarray, rows: np.ndarray, l1: L1Kernel) -> np.n
     Returns
     -------
     distances : (q, m) float64
-        The L1 distance of the weighed ``intrinsic`` and ``sh`` parts plus the light field
-        distance (`lf.lf_distances`) of the light field features times ``scale("lf")``.
+        ``sum_c WEIGHTS[c] * (d_c / MEDIANS[c]) ** POWER``: d_c the L1 distance of a channel's
+        columns (already divided by its median) or, for ``lf``, `lf.lf_distances` of the light
+        field features.
     """
-    head, mine, theirs = _parts(queries, rows, l1)
-    return head + scale("lf") * lf.lf_distances(mine, theirs, l1)
+    light = lf.lf_distances(_light(queries), _light(rows), l1)
+    return _weighed(queries, rows, l1, light)
 
 
 def rigid_bounds(queries: np.ndarray, rows: np.ndarray, l1: L1Kernel) -> np.ndarray:
     """A lower bound of `rigid_distances`, with the light field distance's bound
-    (`lf.lf_bounds`) in its place.
+    (`lf.lf_bounds`) in its place (the power is increasing).
 
     Parameters
     ----------
@@ -164,8 +164,8 @@ def rigid_bounds(queries: np.ndarray, rows: np.ndarray, l1: L1Kernel) -> np.ndar
         At most ``rigid_distances(queries, rows, l1)`` rounded to float32, entry by entry: the
         sum is lowered by a relative 1e-5 to absorb the rounding of both.
     """
-    head, mine, theirs = _parts(queries, rows, l1)
-    return (head + scale("lf") * lf.lf_bounds(mine, theirs, l1)) * (1 - _BOUND_MARGIN)
+    light = lf.lf_bounds(_light(queries), _light(rows), l1)
+    return _weighed(queries, rows, l1, light) * (1 - _BOUND_MARGIN)
 
 
 DESCRIPTOR = Descriptor(
