@@ -230,3 +230,30 @@ def test_inner_parts_anywhere_inside_are_dropped():
         "dropped 3 parts enclosed" in r for r in repaired.repairs
     )
     assert np.array_equal(repaired.vertices, v) and np.array_equal(repaired.faces, f)
+
+
+def _projective_plane(points):
+    """A closed surface that cannot be oriented: the icosahedron with antipodal vertices and
+    faces identified (6 vertices, 10 triangles), its vertices at ``points``."""
+    v, f = icosphere(0)
+    antipode = np.argmin(np.linalg.norm(v[:, None] + v[None], axis=2), axis=1)
+    _, vertex = np.unique(np.minimum(np.arange(len(v)), antipode), return_inverse=True)
+    _, first = np.unique(np.sort(vertex[f], axis=1), axis=0, return_index=True)
+    return np.asarray(points, dtype=float), vertex[f][first]
+
+
+def test_crossing_parts_whose_union_is_refused_stay_apart():
+    v, f = SPHERE
+    points = np.random.default_rng(1).normal(size=(6, 3)) * 0.5 + [0.9, 0, 0]
+    crossing = _projective_plane(points)
+    mesh = clean_mesh(*_stack((v, f), crossing))
+    assert _closed_parts(mesh) == (2, True)
+    repaired = repair_mesh(mesh)
+    assert repaired.route == "repaired" and any("refused" in r for r in repaired.repairs)
+    assert len(repaired.faces) == len(f) + len(crossing[1])
+    assert _position_faces(repaired) == _position_faces(mesh)
+
+
+def _position_faces(mesh):
+    """The faces as sets of vertex positions, independent of numbering and orientation."""
+    return {frozenset(map(tuple, mesh.vertices[face])) for face in mesh.faces}
