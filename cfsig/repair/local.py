@@ -135,8 +135,12 @@ def split_t_junctions(
     Where the two sides of a seam were meshed independently, a vertex of one side lies inside
     an edge of the other, and the seam stays open however close its sides are. Each boundary
     edge gets the boundary vertices within ``tolerance`` of its inside (each vertex on its
-    nearest such edge); its face is split into a fan through them, in order along the edge,
-    so that the seam's two sides share their vertices.
+    nearest such edge) whose two neighbours along their own boundary lie along the seam too:
+    at the edge's ends, within ``tolerance`` of another boundary vertex, or inside another
+    boundary edge. Its face is split into a fan through them, in order along the edge, so
+    that the seam's two sides share their vertices. Two boundaries that only cross each other
+    are left to stitching: splitting there would join their parts at a point and keep them
+    from being stitched.
 
     Parameters
     ----------
@@ -181,6 +185,18 @@ def split_t_junctions(
     on = (gap <= tolerance) & (t > margin) & (t < 1 - margin)
     on &= (point != a[edge]) & (point != b[edge])
     point, edge, t, gap = point[on], edge[on], t[on], gap[on]
+    # Along a seam, the vertex's two neighbours on its boundary lie on the edge's side too: at
+    # the edge's ends, at another boundary vertex or inside another boundary edge. Where two
+    # boundaries merely cross, they lie off it.
+    seam = np.zeros(len(vertices), dtype=bool)
+    seam[point] = True
+    seam[points[cKDTree(vertices[points]).query_pairs(tolerance, output_type="ndarray")]] = True
+    following, preceding = np.full(len(vertices), -1), np.full(len(vertices), -1)
+    following[a], preceding[b] = b, a
+    along = np.ones(len(point), dtype=bool)
+    for neighbour in (following[point], preceding[point]):
+        along &= seam[neighbour] | (neighbour == a[edge]) | (neighbour == b[edge])
+    point, edge, t, gap = point[along], edge[along], t[along], gap[along]
     if len(point) == 0:
         return faces, 0
     nearest = np.lexsort((gap, point))

@@ -96,9 +96,8 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
     """Resolve non-manifold edges, trim overlaps, stitch, drop fragments, fill holes, orient,
     drop inner parts and join crossing ones (docs/method.md, section 1b).
 
-    Returns None unless the result is closed and at most one of its parts needed its holes
-    filled: parts that were closed as read are parts of the object, but several open pieces
-    left apart are one surface cut up, for the proxy.
+    Returns None, for the proxy, beyond `MAX_PARTS` parts, when the union's child fails or
+    when the result is not closed.
     """
     done = list(mesh.repairs)
     vertices, faces = weld_copies(mesh.vertices, mesh.faces)
