@@ -257,3 +257,19 @@ def test_crossing_parts_whose_union_is_refused_stay_apart():
 def _position_faces(mesh):
     """The faces as sets of vertex positions, independent of numbering and orientation."""
     return {frozenset(map(tuple, mesh.vertices[face])) for face in mesh.faces}
+
+
+def test_a_boundary_crossing_an_edge_is_no_t_junction():
+    # A triangle whose boundary edge runs from (0, 0, 0) to (1, 0, 0), and a second sheet with
+    # a boundary vertex at that edge's midpoint.
+    base = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0]], dtype=float)
+    along = np.array([[0.2, 0, 0], [0.5, 0, 0], [0.8, 0, 0], [0.5, -0.5, 0]])
+    across = np.array([[0.5, 0, 0], [0.5, -0.5, 0.5], [0.8, -0.3, -0.6]])
+    for sheet, faces, expected in (
+        (along, [[0, 1, 3], [1, 2, 3]], 1),  # its boundary runs along the edge: a seam
+        (across, [[0, 1, 2]], 0),  # its boundary crosses the edge there
+    ):
+        vertices, triangles = _stack((base, np.array([[0, 1, 2]])), (sheet, np.array(faces)))
+        split, count = split_t_junctions(vertices, triangles, None, 1e-9)
+        assert count == expected
+        assert len(split) == len(triangles) + expected
