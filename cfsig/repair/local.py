@@ -19,7 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from cfsig.files.elements import Edges, edge_lengths, face_areas, mesh_edges
+from cfsig.files.elements import Edges, edge_lengths, face_areas, mesh_edges, signed_volumes
 from cfsig.isolate import Limits, run_limited
 
 # Rounds of `drop_dangling`: each drops what the one before uncovered.
@@ -227,20 +227,18 @@ def orient_parts(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     vertices : (n, 3) float64
         Vertex positions.
     faces : (m, 3) int64
-        Triangles with at most two faces per edge and one fan per vertex.
+        Triangles.
 
     Returns
     -------
     faces : (m, 3) int64
-        The same triangles, some reversed.
+        The same triangles, some reversed, so that the winding numbers of parts add up.
     """
     import igl
 
     oriented, part = igl.bfs_orient(faces)
     oriented, part = np.asarray(oriented, dtype=np.int64), np.asarray(part).ravel()
-    corners = vertices[oriented]
-    volume = np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2]))
-    inward = np.bincount(part, volume) < 0
+    inward = np.bincount(part, signed_volumes(vertices, oriented)) < 0
     flip = inward[part]
     oriented[flip] = oriented[flip][:, ::-1]
     return oriented
