@@ -55,6 +55,11 @@ messy collection (file i replaced by its copy of kind i mod K, files in sorted o
 kinds left out) and each single-kind collection are evaluated leave-one-out
 like the clean one. Files that fail are listed; they rank after every mesh (n + 1) and are left
 out of the collections they belong to.
+
+``--doc FILE`` writes a summary (each kind's rank 1, proxy share and FT, and the clean and
+messy collections' FT) between the lines ``<!-- benchmarks/messy.py NAME -->`` and
+``<!-- /benchmarks/messy.py NAME -->`` of FILE, NAME the data folder's name (docs/results.md
+holds such sections); a FILE without them gets the full results instead.
 """
 
 from __future__ import annotations
@@ -816,6 +821,52 @@ def markdown(results: dict, checks: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def summary(results: dict, name: str) -> str:
+    """The results in short, for a section of docs/results.md: one row per kind."""
+    collections = results["collections"]
+    rows = [
+        [
+            c["kind"],
+            c["copies"],
+            c["failed"],
+            c["rank 1 %"],
+            c["rank 1 %, duplicates as one"],
+            c["proxy %"],
+            collections[f"all {c['kind']}"]["FT"],
+        ]
+        for c in results["copies"]
+    ]
+    headers = ["kind", "copies", "failed", "rank 1 %", "duplicates as one", "proxy %", "FT"]
+    clean, messy = collections["clean"], collections["messy (kinds round-robin)"]
+    return "\n".join(
+        [
+            f"Measured by `{results['command']}` on {results['meshes']} meshes of {name}. "
+            "Rank 1: the copies whose own original is the nearest clean mesh (duplicates as "
+            "one: the clean meshes saved twice count as one shape); FT: the copies of a kind "
+            "as a collection, leave-one-out.",
+            "",
+            common.table(headers, rows),
+            "",
+            f"FT of the clean collection {clean['FT']:.3f}; of the messy one (file i replaced "
+            f"by its copy of kind i mod K) {messy['FT']:.3f}. Failures: "
+            + ("; ".join(results["failures"]) or "none")
+            + ".",
+        ]
+    )
+
+
+def write_doc(path: Path, results: dict, checks: list[dict], name: str) -> None:
+    """Write `summary` into the section of ``path`` named by ``name``, else the full results."""
+    begin, end = f"<!-- benchmarks/messy.py {name} -->", f"<!-- /benchmarks/messy.py {name} -->"
+    text = path.read_text() if path.exists() else ""
+    if begin not in text or end not in text:
+        path.write_text(markdown(results, checks))
+        return
+    head, rest = text.split(begin, 1)
+    tail = rest.split(end, 1)[1]
+    path.write_text(f"{head}{begin}\n\n{summary(results, name)}\n\n{end}{tail}")
+
+
 def main() -> None:
     """Parse the command line and run a stage."""
     parser = common.arguments(__doc__.splitlines()[0])
@@ -830,7 +881,9 @@ def main() -> None:
     parser.add_argument("--descriptor", choices=DESCRIPTORS, default="intrinsic")
     parser.add_argument("--repair", choices=REPAIR_MODES, help="default: the library's")
     parser.add_argument("--check", type=int, default=3, help="meshes whose copies are checked")
-    parser.add_argument("--doc", type=Path, help="write the results as Markdown here")
+    parser.add_argument(
+        "--doc", type=Path, help="write the results as Markdown here (or into its section)"
+    )
     args = parser.parse_args()
     if args.stage == "measure" and args.out is None:
         parser.error("measure reads the copies that write made: pass --out")
@@ -864,7 +917,7 @@ def stage(args: argparse.Namespace, out: Path) -> None:
     print("\n" + text)
     common.save_rows(args.json, [{**results, "checks": checks}])
     if args.doc is not None:
-        args.doc.write_text(text)
+        write_doc(args.doc, results, checks, args.data.resolve().name)
 
 
 if __name__ == "__main__":

@@ -73,7 +73,9 @@ def test_per_mesh(data):
 
 
 def test_messy(data, tmp_path):
-    doc = tmp_path / "messy.md"
+    doc = tmp_path / "results.md"
+    section = "<!-- benchmarks/messy.py shrec07 -->\nold\n<!-- /benchmarks/messy.py shrec07 -->"
+    doc.write_text(f"# Results\n\nKept.\n\n{section}\n\nAlso kept.\n")
     args = ["--data", data / "shrec07", "--every", 2, "--kinds", "holes-10", "proxy", "--check", 1]
     out = run("messy.py", "run", *args, "--jobs", 1, "--doc", doc)
     assert (
@@ -82,7 +84,13 @@ def test_messy(data, tmp_path):
     )
     assert re.search(r"\| holes-10 \| 3 \| 0 \| [\d.]+ \| [\d.]+ \| [\d.]+ \| 0 \|", out)
     assert re.search(r"\| proxy \| 3 \| 0 \| [\d.]+ \| [\d.]+ \| [\d.]+ \| 100 \|", out)
-    assert "| collection | meshes | left out | NN | FT | ST | mAP |" in doc.read_text()
+    assert "| collection | meshes | left out | NN | FT | ST | mAP |" in out
+    text = doc.read_text()
+    assert text.startswith("# Results\n\nKept.\n\n<!-- benchmarks/messy.py shrec07 -->\n")
+    assert text.endswith("<!-- /benchmarks/messy.py shrec07 -->\n\nAlso kept.\n")
+    assert "old" not in text and "Measured by `python benchmarks/messy.py run" in text
+    assert "| kind | copies | failed | rank 1 % | duplicates as one | proxy % | FT |" in text
+    assert re.search(r"\| holes-10 \| 3 \| 0 \| [\d.]+ \| [\d.]+ \| 0 \| [\d.]+ \|", text)
 
 
 def test_index_scale(tmp_path):

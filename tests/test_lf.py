@@ -104,8 +104,9 @@ def test_zernike_moments_of_a_disk():
 
 def test_fourier_descriptors_of_the_contour():
     """A centred disk's contour is at one distance: no frequency but 0. An ellipse's distance
-    repeats twice a turn: frequency 2 leads, the odd ones vanish. A rotated copy, or the
-    mirror image, has the same descriptors."""
+    repeats twice a turn: frequency 2 leads, the odd ones vanish. A rotated copy, the mirror
+    image, or a larger copy reaching the grid's edges as a fitted silhouette does, has the same
+    descriptors."""
     grid = 128
     centres = (np.arange(grid) + 0.5) / (grid / 2) - 1
     x, y = np.meshgrid(centres, -centres)
@@ -116,13 +117,14 @@ def test_fourier_descriptors_of_the_contour():
             (x / 0.8) ** 2 + (y / 0.4) ** 2 <= 1,
             ((c * x + s * y) / 0.8) ** 2 + ((c * y - s * x) / 0.4) ** 2 <= 1,
             ((c * x - s * y) / 0.8) ** 2 + ((c * y + s * x) / 0.4) ** 2 <= 1,
+            x**2 + (y / 0.5) ** 2 <= 1,
         ]
     )
-    found = lf.fourier_descriptors(lf.contour_distances(shapes, np.zeros((4, 2))))
+    found = lf.fourier_descriptors(lf.contour_distances(shapes, np.zeros((5, 2))))
     assert found[0].max() < 0.01
     assert np.argmax(found[1]) == 1 and found[1, 1] > 0.1
     assert found[1, ::2].max() < 0.01  # frequencies 1, 3, 5...
-    np.testing.assert_allclose(found[2:], found[[1, 1]], atol=0.01)
+    np.testing.assert_allclose(found[2:], found[[1, 1, 1]], atol=0.01)
 
 
 def test_features_are_whole_numbers_in_8_bits(vectors):

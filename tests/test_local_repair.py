@@ -230,3 +230,46 @@ def test_inner_parts_anywhere_inside_are_dropped():
         "dropped 3 parts enclosed" in r for r in repaired.repairs
     )
     assert np.array_equal(repaired.vertices, v) and np.array_equal(repaired.faces, f)
+
+
+def _projective_plane(points):
+    """A closed surface that cannot be oriented: the icosahedron with antipodal vertices and
+    faces identified (6 vertices, 10 triangles), its vertices at ``points``."""
+    v, f = icosphere(0)
+    antipode = np.argmin(np.linalg.norm(v[:, None] + v[None], axis=2), axis=1)
+    _, vertex = np.unique(np.minimum(np.arange(len(v)), antipode), return_inverse=True)
+    _, first = np.unique(np.sort(vertex[f], axis=1), axis=0, return_index=True)
+    return np.asarray(points, dtype=float), vertex[f][first]
+
+
+def test_crossing_parts_whose_union_is_refused_stay_apart():
+    v, f = SPHERE
+    points = np.random.default_rng(1).normal(size=(6, 3)) * 0.5 + [0.9, 0, 0]
+    crossing = _projective_plane(points)
+    mesh = clean_mesh(*_stack((v, f), crossing))
+    assert _closed_parts(mesh) == (2, True)
+    repaired = repair_mesh(mesh)
+    assert repaired.route == "repaired" and any("refused" in r for r in repaired.repairs)
+    assert len(repaired.faces) == len(f) + len(crossing[1])
+    assert _position_faces(repaired) == _position_faces(mesh)
+
+
+def _position_faces(mesh):
+    """The faces as sets of vertex positions, independent of numbering and orientation."""
+    return {frozenset(map(tuple, mesh.vertices[face])) for face in mesh.faces}
+
+
+def test_a_boundary_crossing_an_edge_is_no_t_junction():
+    # A triangle whose boundary edge runs from (0, 0, 0) to (1, 0, 0), and a second sheet with
+    # a boundary vertex at that edge's midpoint.
+    base = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0]], dtype=float)
+    along = np.array([[0.2, 0, 0], [0.5, 0, 0], [0.8, 0, 0], [0.5, -0.5, 0]])
+    across = np.array([[0.5, 0, 0], [0.5, -0.5, 0.5], [0.8, -0.3, -0.6]])
+    for sheet, faces, expected in (
+        (along, [[0, 1, 3], [1, 2, 3]], 1),  # its boundary runs along the edge: a seam
+        (across, [[0, 1, 2]], 0),  # its boundary crosses the edge there
+    ):
+        vertices, triangles = _stack((base, np.array([[0, 1, 2]])), (sheet, np.array(faces)))
+        split, count = split_t_junctions(vertices, triangles, None, 1e-9)
+        assert count == expected
+        assert len(split) == len(triangles) + expected

@@ -170,11 +170,17 @@ def test_stitching_ignores_the_orientation_of_the_parts():
     assert _one_closed_manifold(repaired) and len(repaired.vertices) == len(v)
 
 
-def test_parts_too_far_apart_are_not_stitched():
+def test_open_parts_too_far_apart_are_each_closed():
     v, f = SPHERE
+    a, b, _ = _cut(v, f)
     mesh = clean_mesh(*_gapped(v, f, fraction=5 * repair.STITCH_DISTANCE))
     result = repair_mesh(mesh, "auto")
-    assert not _has(result, "stitched") and result.route == "proxy"
+    assert not _has(result, "stitched") and _has(result, "closed 2 holes")
+    assert result.route == "repaired" and _is_closed(result) and _components(result) == 2
+    # Each part keeps its faces as read, plus a fan over its cut.
+    assert len(result.faces) == len(f) + sum(
+        len(boundary_loops(mesh_edges(part, len(v)), len(v))[0]) for part in (a, b)
+    )
 
 
 def test_overlapping_parts_are_trimmed():

@@ -375,7 +375,9 @@ def contour_distances(images: np.ndarray, centres: np.ndarray) -> np.ndarray:
 
     The contour is the longest of the silhouette's boundaries (contourpy's marching squares at
     level 1/2), resampled at `CONTOUR_POINTS` points equally spaced along its length from where
-    contourpy starts it: the Fourier magnitudes taken of it do not depend on that start.
+    contourpy starts it: the Fourier magnitudes taken of it do not depend on that start. The
+    grid is framed by a pixel of background first: a silhouette fitted to its grid reaches the
+    edges, where marching squares would cut its boundary into open pieces.
 
     Parameters
     ----------
@@ -390,10 +392,11 @@ def contour_distances(images: np.ndarray, centres: np.ndarray) -> np.ndarray:
         Distances from the centre, in the grid's units; zero for an empty silhouette.
     """
     grid = images.shape[1]
-    axis = (np.arange(grid) + 0.5) / (grid / 2) - 1
+    axis = (np.arange(-1, grid + 1) + 0.5) / (grid / 2) - 1
     out = np.zeros((len(images), CONTOUR_POINTS))
     for i, image in enumerate(images):
-        generator = contour_generator(axis, axis, image[::-1].astype(np.float64), name="serial")
+        framed = np.pad(image[::-1].astype(np.float64), 1)
+        generator = contour_generator(axis, axis, framed, name="serial")
         lines = cast(list[np.ndarray], generator.lines(0.5))  # the default type: separate lines
         if not lines:
             continue

@@ -156,6 +156,26 @@ def edge_lengths(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return np.sqrt(squared, out=squared)
 
 
+def signed_volumes(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Six times the signed volume of each face's tetrahedron with the origin.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        Vertex positions.
+    faces : (m, 3) int64
+        Triangles.
+
+    Returns
+    -------
+    volumes : (m,) float64
+        In cubed length units; summed over a closed part, six times its volume, positive when
+        its faces face out.
+    """
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    return np.einsum("ij,ij->i", a, np.cross(b, c))
+
+
 def face_areas(lengths: np.ndarray) -> np.ndarray:
     """Triangle areas by Heron's formula in its numerically stable form (Kahan).
 

@@ -19,8 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from cfsig.errors import StageLimitError
-from cfsig.files.elements import Edges, edge_lengths, face_areas, mesh_edges
+from cfsig.files.elements import Edges, edge_lengths, face_areas, mesh_edges, signed_volumes
 from cfsig.isolate import Limits, run_limited
 
 # Rounds of `drop_dangling`: each drops what the one before uncovered.
@@ -136,8 +135,12 @@ def split_t_junctions(
     Where the two sides of a seam were meshed independently, a vertex of one side lies inside
     an edge of the other, and the seam stays open however close its sides are. Each boundary
     edge gets the boundary vertices within ``tolerance`` of its inside (each vertex on its
-    nearest such edge); its face is split into a fan through them, in order along the edge,
-    so that the seam's two sides share their vertices.
+    nearest such edge) whose two neighbours along their own boundary lie along the seam too:
+    at the edge's ends, within ``tolerance`` of another boundary vertex, or inside another
+    boundary edge. Its face is split into a fan through them, in order along the edge, so
+    that the seam's two sides share their vertices. Two boundaries that only cross each other
+    are left to stitching: splitting there would join their parts at a point and keep them
+    from being stitched.
 
     Parameters
     ----------
@@ -182,6 +185,18 @@ def split_t_junctions(
     on = (gap <= tolerance) & (t > margin) & (t < 1 - margin)
     on &= (point != a[edge]) & (point != b[edge])
     point, edge, t, gap = point[on], edge[on], t[on], gap[on]
+    # Along a seam, the vertex's two neighbours on its boundary lie on the edge's side too: at
+    # the edge's ends, at another boundary vertex or inside another boundary edge. Where two
+    # boundaries merely cross, they lie off it.
+    seam = np.zeros(len(vertices), dtype=bool)
+    seam[point] = True
+    seam[points[cKDTree(vertices[points]).query_pairs(tolerance, output_type="ndarray")]] = True
+    following, preceding = np.full(len(vertices), -1), np.full(len(vertices), -1)
+    following[a], preceding[b] = b, a
+    along = np.ones(len(point), dtype=bool)
+    for neighbour in (following[point], preceding[point]):
+        along &= seam[neighbour] | (neighbour == a[edge]) | (neighbour == b[edge])
+    point, edge, t, gap = point[along], edge[along], t[along], gap[along]
     if len(point) == 0:
         return faces, 0
     nearest = np.lexsort((gap, point))
@@ -212,20 +227,18 @@ def orient_parts(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     vertices : (n, 3) float64
         Vertex positions.
     faces : (m, 3) int64
-        Triangles with at most two faces per edge and one fan per vertex.
+        Triangles.
 
     Returns
     -------
     faces : (m, 3) int64
-        The same triangles, some reversed.
+        The same triangles, some reversed, so that the winding numbers of parts add up.
     """
     import igl
 
     oriented, part = igl.bfs_orient(faces)
     oriented, part = np.asarray(oriented, dtype=np.int64), np.asarray(part).ravel()
-    corners = vertices[oriented]
-    volume = np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2]))
-    inward = np.bincount(part, volume) < 0
+    inward = np.bincount(part, signed_volumes(vertices, oriented)) < 0
     flip = inward[part]
     oriented[flip] = oriented[flip][:, ::-1]
     return oriented
@@ -233,7 +246,7 @@ def orient_parts(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def closed_parts(
     vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, limits: Limits
-) -> tuple[np.ndarray, np.ndarray, int, int]:
+) -> tuple[np.ndarray, np.ndarray, int, int, int]:
     """Drop the closed parts inside another, join the parts that cross each other.
 
     A part's probe vertices (up to `PROBES`) are tested against the generalized winding number
@@ -241,7 +254,7 @@ def closed_parts(
     at least `ENCLOSED_SHARE` of them are inside, the part is hidden inner geometry and is
     dropped; when some are, the two cross. Parts that cross are joined by manifold3d's exact
     union, in a child process under ``limits``; parts apart stay as they are, each a part of
-    the object (buttons, wheels).
+    the object (buttons, wheels), and so do crossing parts whose union manifold3d refuses.
 
     Parameters
     ----------
@@ -264,17 +277,19 @@ def closed_parts(
         Number of parts dropped.
     joined : int
         Number of parts joined into others.
+    refused : int
+        Number of crossing parts left apart, their union refused.
 
     Raises
     ------
     StageLimitError
-        The union failed or exceeded its limits.
+        The union crashed or exceeded its limits.
     """
     import igl
 
     n_parts = int(labels.max()) + 1
     if n_parts < 2:
-        return vertices, faces, 0, 0
+        return vertices, faces, 0, 0, 0
     face_part = labels[faces[:, 0]]
     low = np.full((n_parts, 3), np.inf)
     high = np.full((n_parts, 3), -np.inf)
@@ -305,7 +320,7 @@ def closed_parts(
     kept = ~enclosed
     pairs = [(p, q) for p, q in crossing if kept[p] and kept[q]]
     if not pairs:
-        return vertices, faces[kept[face_part]], int(enclosed.sum()), 0
+        return vertices, faces[kept[face_part]], int(enclosed.sum()), 0, 0
     p, q = np.array(pairs).T
     graph = sp.coo_matrix((np.ones(len(p)), (p, q)), shape=(n_parts, n_parts))
     _, group = connected_components(graph, directed=False)
@@ -316,24 +331,30 @@ def closed_parts(
         [(vertices, pieces[part]) for part in np.flatnonzero(kept & (group == g))]
         for g in joined_groups
     ]
+    import manifold3d  # noqa: F401  (imported before the fork, once per process)
+
     unions = run_limited(_unions, (union_parts,), limits, "the union of crossing parts")
-    joined = kept & np.isin(group, joined_groups)
+    done = [g for g, union in zip(joined_groups, unions, strict=True) if union is not None]
+    joined = kept & np.isin(group, done)
     new_vertices, new_faces, count = [vertices], [faces[(kept & ~joined)[face_part]]], len(vertices)
-    for union_vertices, union_faces in unions:
+    for union_vertices, union_faces in filter(None, unions):
         new_vertices.append(union_vertices)
         new_faces.append(union_faces + count)
         count += len(union_vertices)
-    n_joined = int(joined.sum()) - len(joined_groups)
-    return np.vstack(new_vertices), np.vstack(new_faces), int(enclosed.sum()), n_joined
+    n_joined = int(joined.sum()) - len(done)
+    refused = int(np.sum(kept & np.isin(group, joined_groups) & ~joined))
+    return (np.vstack(new_vertices), np.vstack(new_faces), int(enclosed.sum()), n_joined, refused)
 
 
 def _unions(
     groups: list[list[tuple[np.ndarray, np.ndarray]]],
-) -> list[tuple[np.ndarray, np.ndarray]]:
-    """manifold3d's exact union of each group of closed, outward-oriented parts."""
+) -> list[tuple[np.ndarray, np.ndarray] | None]:
+    """manifold3d's exact union of each group of closed, outward-oriented parts; None for a
+    group that manifold3d refuses (a part it does not take as a manifold, such as one that
+    cannot be oriented) or whose union comes out empty."""
     import manifold3d
 
-    results = []
+    results: list[tuple[np.ndarray, np.ndarray] | None] = []
     for group in groups:
         solids = []
         for vertices, faces in group:
@@ -342,13 +363,14 @@ def _unions(
                 np.ascontiguousarray(vertices[used]),
                 np.ascontiguousarray(inverse.reshape(-1, 3), dtype=np.uint64),
             )
-            solid = manifold3d.Manifold(mesh)
-            if solid.status() != manifold3d.Error.NoError:
-                raise StageLimitError(f"a part is not a closed manifold: {solid.status()}")
-            solids.append(solid)
+            solids.append(manifold3d.Manifold(mesh))
+        if any(solid.status() != manifold3d.Error.NoError for solid in solids):
+            results.append(None)
+            continue
         union = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add).to_mesh64()
         if len(union.tri_verts) == 0:
-            raise StageLimitError("the union of crossing parts came out empty")
+            results.append(None)
+            continue
         results.append(
             (np.asarray(union.vert_properties[:, :3], dtype=np.float64),
              np.asarray(union.tri_verts, dtype=np.int64))

@@ -17,9 +17,17 @@ from dataclasses import replace
 import numpy as np
 
 from cfsig.errors import MeshError
-from cfsig.files.elements import components, edge_graph, edge_lengths, face_areas, mesh_edges
+from cfsig.files.elements import (
+    components,
+    edge_graph,
+    edge_lengths,
+    face_areas,
+    mesh_edges,
+    signed_volumes,
+)
 from cfsig.files.mesh import Mesh, clean_mesh
 from cfsig.isolate import Limits, run_limited
+from cfsig.repair.local import orient_parts
 from cfsig.repair.simplify import decimate
 
 # The cell size: the thickness of the thinnest parts (this percentile of the surface's area)
@@ -94,7 +102,7 @@ def proxy_surface(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     """
     import igl
 
-    oriented = orient_outward(vertices, faces)
+    oriented = orient_parts(vertices, faces)
     cell = cell_size(vertices, oriented)
     origin = vertices.min(axis=0) - 2 * cell
     cells = surface_cells(vertices, oriented, origin, cell)
@@ -129,7 +137,7 @@ def signed_distance(
     vertices : (n, 3) float64
         Vertex positions.
     faces : (m, 3) int64
-        Triangles facing out (`orient_outward`).
+        Triangles facing out (`orient_parts`).
     bound : float
         Distances beyond are not needed (libigl stops searching there).
     sheet : float
@@ -286,30 +294,6 @@ def _boxes_covering(
     return count[tuple(cell.T)], own
 
 
-def orient_outward(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Faces oriented consistently within each part, each part facing out (positive volume).
-
-    Parameters
-    ----------
-    vertices : (n, 3) float64
-        Vertex positions.
-    faces : (m, 3) int64
-        Triangles.
-
-    Returns
-    -------
-    faces : (m, 3) int64
-        The same triangles, some reversed, so that the winding numbers of parts add up.
-    """
-    import igl
-
-    oriented, part = igl.bfs_orient(faces)
-    volume = np.bincount(part, _signed_volumes(vertices, oriented))
-    flip = volume[part] < 0
-    oriented[flip] = oriented[flip][:, ::-1]
-    return oriented
-
-
 def cell_size(vertices: np.ndarray, faces: np.ndarray) -> float:
     """The grid's cell: `CELLS_ACROSS` cells across the thinnest parts, within the bounds.
 
@@ -318,7 +302,7 @@ def cell_size(vertices: np.ndarray, faces: np.ndarray) -> float:
     vertices : (n, 3) float64
         Vertex positions.
     faces : (m, 3) int64
-        Triangles facing out (`orient_outward`).
+        Triangles facing out (`orient_parts`).
 
     Returns
     -------
@@ -346,7 +330,7 @@ def thickness(vertices: np.ndarray, faces: np.ndarray, seed: int = 0) -> np.ndar
     vertices : (n, 3) float64
         Vertex positions.
     faces : (m, 3) int64
-        Triangles facing out (`orient_outward`).
+        Triangles facing out (`orient_parts`).
     seed : int
         Seed of the points' placement.
 
@@ -500,11 +484,5 @@ def enclosing_parts(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray
         return vertices, faces
     n_parts, labels = components(edge_graph(faces, len(vertices)))
     part = labels[faces[:, 0]]
-    volume = np.bincount(part, _signed_volumes(vertices, faces), n_parts)
+    volume = np.bincount(part, signed_volumes(vertices, faces), n_parts)
     return vertices, faces[volume[part] > 0]
-
-
-def _signed_volumes(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Six times the signed volume of each face's tetrahedron with the origin, (m,)."""
-    a, b, c = (vertices[faces[:, k]] for k in range(3))
-    return np.einsum("ij,ij->i", a, np.cross(b, c))

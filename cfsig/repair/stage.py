@@ -96,9 +96,8 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
     """Resolve non-manifold edges, trim overlaps, stitch, drop fragments, fill holes, orient,
     drop inner parts and join crossing ones (docs/method.md, section 1b).
 
-    Returns None unless the result is closed and at most one of its parts needed its holes
-    filled: parts that were closed as read are parts of the object, but several open pieces
-    left apart are one surface cut up, for the proxy.
+    Returns None, for the proxy, beyond `MAX_PARTS` parts, when the union's child fails or
+    when the result is not closed.
     """
     done = list(mesh.repairs)
     vertices, faces = weld_copies(mesh.vertices, mesh.faces)
@@ -131,8 +130,6 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
     if dropped:
         done.append(f"dropped {dropped} small open fragments")
     vertices, faces, edges = _tidy(vertices, faces)
-    if _open_parts(faces, len(vertices), edges) > 1:
-        return None
     vertices, faces, filled = fill_holes(vertices, faces, edges)
     if filled:
         done.append(f"closed {filled} holes")
@@ -140,13 +137,15 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
     faces = orient_parts(vertices, faces)
     labels = _face_graph(faces, len(vertices), edges)[2]
     try:
-        vertices, faces, enclosed, joined = closed_parts(vertices, faces, labels, limits)
+        vertices, faces, enclosed, joined, refused = closed_parts(vertices, faces, labels, limits)
     except StageLimitError:
         return None
     if enclosed:
         done.append(f"dropped {enclosed} parts enclosed by another")
     if joined:
         done.append(f"joined {joined} crossing parts to others by their union")
+    if refused:
+        done.append(f"left {refused} crossing parts apart: manifold3d refused their union")
     result = clean_mesh(vertices, faces, weld=False)
     n_parts, labels, closed = _surface(result)
     if not closed:
@@ -154,13 +153,6 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
     if n_parts > 1:
         done.append(f"kept {n_parts} closed parts")
     return replace(result, repairs=tuple(done), route="repaired", parts=labels)
-
-
-def _open_parts(faces: np.ndarray, n_vertices: int, edges: Edges | None) -> int:
-    """The number of parts with an edge of one face."""
-    edges, n_parts, labels = _face_graph(faces, n_vertices, edges)
-    boundary = edges.ends[np.diff(edges.starts) == 1, 0]
-    return len(np.unique(labels[boundary]))
 
 
 def _tidy(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, Edges | None]:
