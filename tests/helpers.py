@@ -7,11 +7,12 @@ from pathlib import Path
 
 import numpy as np
 
-from cfsig.descriptors import layout
+from cfsig.descriptors import get, layout
 from cfsig.descriptors.signature import Signature, compute_signature
 from cfsig.files.mesh import clean_mesh
-from cfsig.index.store import Entry, IndexWriter
+from cfsig.index.store import Entry, IndexReader, IndexWriter
 from cfsig.params import Params
+from cfsig.search.nearest import distances, nearest_by, query
 
 
 def icosphere(levels: int = 3) -> tuple[np.ndarray, np.ndarray]:
@@ -176,3 +177,40 @@ def read_plain(index: str | os.PathLike) -> dict:
     finally:
         for s in segments:
             s.close()
+
+
+def assert_search_equals_full_scan(
+    path: Path, params: Params, rows: list, base: np.ndarray
+) -> None:
+    """Index ``rows`` (float32 vectors of ``params``' descriptor) in two segments, supersede
+    row 3 by ``base[1]``, and check that the descriptor's bounded search returns the full
+    scan's rows and distances for several k, ties included."""
+    descriptor = get(params.descriptor)
+
+    def signature(vector: np.ndarray, seed: int) -> Signature:
+        return Signature(
+            vector=vector, phi=None, n_vertices=3, n_faces=1, n_components=1,
+            curvature_error=float("nan"), repairs=(), route="clean", seconds=0.0,
+            sha256=f"{seed:064d}",
+        )  # fmt: skip
+
+    for first, last in ((0, 18), (18, len(rows))):
+        with open_writer(path, params) as writer:
+            for i in range(first, last):
+                writer.add(Entry(f"c/{i}.off", "c", f"/c/{i}.off"), signature(rows[i], i))
+    with open_writer(path, params) as writer:
+        rows[3] = np.float32(base[1])
+        writer.add(Entry("c/3.off", "c", "/c/3.off"), signature(rows[3], 99))
+    queries = np.float32([rows[2], base[0], base[3], rows[20]])
+    full = distances(params.descriptor, queries, np.array(rows))
+    with IndexReader(path) as reader:
+        order = [int(n.split("/")[1].split(".")[0]) for n in reader.column("names")]
+        for k in (1, 3, 7):
+            found, dist = nearest_by(reader, queries, k, descriptor.distance)
+            for j in range(len(queries)):
+                scan = full[j, order]
+                expected = np.lexsort((np.arange(len(order)), scan))[:k]
+                np.testing.assert_array_equal(found[j], expected)
+                np.testing.assert_array_equal(dist[j], np.float32(scan[expected]))
+        hits = query(reader, queries[:1], 3)[0]
+        assert [h.distance for h in hits] == [0.0, 0.0, 0.0]

@@ -8,14 +8,18 @@ from click.testing import CliRunner
 from cfsig import descriptors
 from cfsig.cli import main
 from cfsig.descriptors import intrinsic, lf, rigid
-from cfsig.descriptors.signature import Signature, compute_signature
+from cfsig.descriptors.signature import compute_signature
 from cfsig.files.demo import capsule, limbed_body, torus
 from cfsig.files.mesh import clean_mesh
-from cfsig.index.store import Entry, IndexReader, IndexWriter
-from cfsig.params import Layout, Params
+from cfsig.params import Params
 from cfsig.search.l1 import l1_numpy
-from cfsig.search.nearest import distances, nearest_by, query
-from tests.helpers import icosphere, open_cylinder, random_rotation, write_off
+from tests.helpers import (
+    assert_search_equals_full_scan,
+    icosphere,
+    open_cylinder,
+    random_rotation,
+    write_off,
+)
 
 RIGID = Params(descriptor="rigid")
 TAIL = rigid.LENGTH - rigid.HEAD  # the light field features
@@ -109,14 +113,6 @@ def test_the_bound_is_below_the_distance(vectors):
     assert bounds[exact > 0].mean() > 0.3 * exact[exact > 0].mean()  # bounds that prune
 
 
-def _signature(vector: np.ndarray, seed: int) -> Signature:
-    return Signature(
-        vector=vector, phi=None, n_vertices=3, n_faces=1, n_components=1,
-        curvature_error=float("nan"), repairs=(), route="clean", seconds=0.0,
-        sha256=f"{seed:064d}",
-    )  # fmt: skip
-
-
 def test_search_equals_a_full_scan(tmp_path, vectors):
     """Rows near a few shapes, duplicates among them (ties), in two segments with a row
     superseded: the bounded search returns the full scan's rows and distances."""
@@ -129,29 +125,7 @@ def test_search_equals_a_full_scan(tmp_path, vectors):
         row[rigid.HEAD :] = np.clip(row[rigid.HEAD :] + rng.integers(-40, 40, TAIL), 0, 255)
         rows.append(row)
     rows[5] = rows[9] = rows[2]
-    layout = Layout(rigid.LENGTH)
-    path = tmp_path / "index"
-    for first, last in ((0, 18), (18, 30)):
-        with IndexWriter(path, RIGID, layout) as writer:
-            for i in range(first, last):
-                writer.add(Entry(f"c/{i}.off", "c", f"/c/{i}.off"), _signature(rows[i], i))
-    with IndexWriter(path, RIGID, layout) as writer:  # supersede row 3
-        rows[3] = base[1]
-        writer.add(Entry("c/3.off", "c", "/c/3.off"), _signature(rows[3], 99))
-    queries = np.float32([rows[2], base[0], base[3], rows[20]])
-    full = distances("rigid", queries, np.array(rows))
-    with IndexReader(path) as reader:
-        names = list(reader.column("names"))
-        order = [int(n.split("/")[1].split(".")[0]) for n in names]
-        for k in (1, 3, 7):
-            found, dist = nearest_by(reader, queries, k, rigid.DESCRIPTOR.distance)
-            for j in range(len(queries)):
-                scan = full[j, order]
-                expected = np.lexsort((np.arange(len(order)), scan))[:k]
-                np.testing.assert_array_equal(found[j], expected)
-                np.testing.assert_array_equal(dist[j], np.float32(scan[expected]))
-        hits = query(reader, queries[:1], 3)[0]
-        assert [h.distance for h in hits] == [0.0, 0.0, 0.0]
+    assert_search_equals_full_scan(tmp_path / "index", RIGID, rows, base)
 
 
 def test_the_command_line_computes_indexes_queries_evaluates_and_checks(tmp_path):
