@@ -9,6 +9,8 @@ import numpy as np
 
 from cfsig.descriptors import get, layout
 from cfsig.descriptors.signature import Signature, compute_signature
+from cfsig.files.demo import capsule, limbed_body
+from cfsig.files.demo import torus as demo_torus
 from cfsig.files.mesh import clean_mesh
 from cfsig.index.store import Entry, IndexReader, IndexWriter
 from cfsig.params import Params
@@ -214,3 +216,26 @@ def assert_search_equals_full_scan(
                 np.testing.assert_array_equal(dist[j], np.float32(scan[expected]))
         hits = query(reader, queries[:1], 3)[0]
         assert [h.distance for h in hits] == [0.0, 0.0, 0.0]
+
+
+# Shapes far enough apart that a descriptor tells them from one another, for the invariance
+# tests of the extrinsic descriptors.
+SHAPES = {
+    "limbs3": lambda: limbed_body(3, pose=1),
+    "limbs5": lambda: limbed_body(5, pose=2),
+    "torus": lambda: demo_torus(wave=0.2),
+    "capsule": lambda: capsule(bend=0.6),
+}
+
+
+def two_classes(folder: Path) -> None:
+    """Write a labelled folder of two classes of two meshes: ``round`` and ``long``."""
+    v, f = icosphere(2)
+    meshes = {
+        "round/a.off": (v, f),
+        "round/b.off": (v * [1.0, 1.1, 0.9], f),
+        "long/a.off": capsule(length=2.0),
+        "long/b.off": capsule(length=2.2, bend=0.2),
+    }
+    for name, (vertices, faces) in meshes.items():
+        write_off(folder / name, vertices, faces)

@@ -10,19 +10,19 @@ from click.testing import CliRunner
 from cfsig.cli import main
 from cfsig.descriptors import lf
 from cfsig.descriptors.signature import compute_signature
-from cfsig.files.demo import capsule, limbed_body, torus
+from cfsig.files.demo import capsule, torus
 from cfsig.files.mesh import clean_mesh
 from cfsig.params import Params
 from cfsig.search.l1 import l1_numpy
-from tests.helpers import assert_search_equals_full_scan, icosphere, random_rotation, write_off
+from tests.helpers import (
+    SHAPES,
+    assert_search_equals_full_scan,
+    icosphere,
+    random_rotation,
+    two_classes,
+)
 
 LF = Params(descriptor="lf")
-MESHES = {
-    "limbs3": lambda: limbed_body(3, pose=1),
-    "limbs5": lambda: limbed_body(5, pose=2),
-    "torus": lambda: torus(wave=0.2),
-    "capsule": lambda: capsule(bend=0.6),
-}
 
 
 def _vector(v, f):
@@ -35,7 +35,7 @@ def _distance(a, b):
 
 @pytest.fixture(scope="module")
 def vectors():
-    return {name: _vector(*make()) for name, make in MESHES.items()}
+    return {name: _vector(*make()) for name, make in SHAPES.items()}
 
 
 def test_the_dodecahedron_rotations_permute_its_views():
@@ -144,13 +144,13 @@ def test_identical_silhouettes_are_at_distance_zero(vectors):
     assert _distance(vectors["torus"], _vector(3.5 * v + [1.0, -2.0, 0.5], f)) == 0
 
 
-@pytest.mark.parametrize("name", sorted(MESHES))
+@pytest.mark.parametrize("name", sorted(SHAPES))
 def test_rotation_invariance(vectors, name):
     """Turned by a rotation of the dodecahedron, a mesh keeps its silhouettes (up to the pixel
     grid): its distance is far below that to any other shape; turned by any rotation, well
     below."""
-    v, f = MESHES[name]()
-    others = min(_distance(vectors[name], vectors[o]) for o in MESHES if o != name)
+    v, f = SHAPES[name]()
+    others = min(_distance(vectors[name], vectors[o]) for o in SHAPES if o != name)
     turned = _vector(v @ lf.dodecahedron_rotations()[17].T, f)
     assert _distance(vectors[name], turned) < 0.15 * others
     turned = _vector(v @ random_rotation(4).T, f)
@@ -180,14 +180,7 @@ def test_search_equals_a_full_scan(tmp_path, vectors):
 
 
 def test_the_command_line_indexes_queries_evaluates_and_checks(tmp_path):
-    meshes = {
-        "round/a.off": icosphere(2),
-        "round/b.off": (icosphere(2)[0] * [1.0, 1.1, 0.9], icosphere(2)[1]),
-        "long/a.off": capsule(length=2.0),
-        "long/b.off": capsule(length=2.2, bend=0.2),
-    }
-    for name, (v, f) in meshes.items():
-        write_off(tmp_path / "data" / name, v, f)
+    two_classes(tmp_path / "data")
     runner = CliRunner()
     index = str(tmp_path / "index")
     out = runner.invoke(main, ["index", str(tmp_path / "data"), "-o", index, "--descriptor", "lf"])
@@ -213,10 +206,10 @@ def test_signature_goes_through_the_repair_stage():
 def test_fewer_light_fields_are_the_first_ones(vectors):
     """The features of the first light fields are those the full vector begins with, and their
     distance is that of the full vectors' first light fields, bounded as the full one is."""
-    v, f = MESHES["limbs3"]()
+    v, f = SHAPES["limbs3"]()
     first = lf.light_field_features(clean_mesh(v, f), 3)
     np.testing.assert_array_equal(first, vectors["limbs3"][: len(first)])
-    rows = np.float32([vectors[name][: len(first)] for name in MESHES])
+    rows = np.float32([vectors[name][: len(first)] for name in SHAPES])
     exact = lf.lf_distances(rows, rows, l1_numpy)
     full = lf.lf_distances(*(2 * [np.float32(list(vectors.values()))]), l1_numpy)
     assert np.all(lf.lf_bounds(rows, rows, l1_numpy) <= exact) and np.all(exact >= full)

@@ -9,26 +9,19 @@ from cfsig import descriptors
 from cfsig.cli import main
 from cfsig.descriptors import intrinsic, lf, rigid
 from cfsig.descriptors.signature import compute_signature
-from cfsig.files.demo import capsule, limbed_body, torus
 from cfsig.files.mesh import clean_mesh
 from cfsig.params import Params
 from cfsig.search.l1 import l1_numpy
 from tests.helpers import (
+    SHAPES,
     assert_search_equals_full_scan,
-    icosphere,
     open_cylinder,
     random_rotation,
-    write_off,
+    two_classes,
 )
 
 RIGID = Params(descriptor="rigid")
 TAIL = rigid.LENGTH - rigid.HEAD  # the light field features
-MESHES = {
-    "limbs3": lambda: limbed_body(3, pose=1),
-    "limbs5": lambda: limbed_body(5, pose=2),
-    "torus": lambda: torus(wave=0.2),
-    "capsule": lambda: capsule(bend=0.6),
-}
 
 
 def _vector(v, f):
@@ -41,7 +34,7 @@ def _distance(a, b):
 
 @pytest.fixture(scope="module")
 def vectors():
-    return {name: _vector(*make()) for name, make in MESHES.items()}
+    return {name: _vector(*make()) for name, make in SHAPES.items()}
 
 
 def _nearest_other(vectors, name):
@@ -52,7 +45,7 @@ def test_the_distance_weighs_the_channels_of_the_three_descriptors():
     """The distance of two meshes sums over the four channels each one's distance, as its own
     descriptor measures it (``lf``'s on the first light fields), over its median, to the power,
     times its weight."""
-    meshes = [clean_mesh(*make()) for make in (MESHES["limbs3"], MESHES["capsule"])]
+    meshes = [clean_mesh(*make()) for make in (SHAPES["limbs3"], SHAPES["capsule"])]
     parts = {
         name: [descriptors.get(name).compute(m, Params(descriptor=name), None, "auto").vector
                for m in meshes]
@@ -77,12 +70,12 @@ def test_the_distance_weighs_the_channels_of_the_three_descriptors():
     assert all(rigid.WEIGHTS[name] > 0 for name in rigid.CHANNELS)
 
 
-@pytest.mark.parametrize("name", sorted(MESHES))
+@pytest.mark.parametrize("name", sorted(SHAPES))
 def test_rotation_invariance(vectors, name):
     """A rotated shape lies nearer its unrotated self than any other shape does, not much: the
     light fields, three of them only, see it from other directions, and the power of the
     distance (0.3) lifts small differences (docs/method.md)."""
-    v, f = MESHES[name]()
+    v, f = SHAPES[name]()
     turned = _vector(v @ random_rotation(len(name)).T, f)
     assert _distance(vectors[name], turned) < _nearest_other(vectors, name)
 
@@ -90,7 +83,7 @@ def test_rotation_invariance(vectors, name):
 def test_translation_and_scale_invariance(vectors):
     """Moved and scaled, a shape stays within half its distance to any other: only round-off (a
     pixel of a silhouette, a feature's last quantum) moves it, lifted by the power 0.3."""
-    v, f = MESHES["limbs3"]()
+    v, f = SHAPES["limbs3"]()
     nearest = _nearest_other(vectors, "limbs3")
     for factor, shift in ((0.01, [3.0, -1.0, 2.0]), (250.0, [-40.0, 7.0, 0.5])):
         moved = _vector(v * factor + shift, f)
@@ -129,14 +122,7 @@ def test_search_equals_a_full_scan(tmp_path, vectors):
 
 
 def test_the_command_line_computes_indexes_queries_evaluates_and_checks(tmp_path):
-    meshes = {
-        "round/a.off": icosphere(2),
-        "round/b.off": (icosphere(2)[0] * [1.0, 1.1, 0.9], icosphere(2)[1]),
-        "long/a.off": capsule(length=2.0),
-        "long/b.off": capsule(length=2.2, bend=0.2),
-    }
-    for name, (v, f) in meshes.items():
-        write_off(tmp_path / "data" / name, v, f)
+    two_classes(tmp_path / "data")
     runner = CliRunner()
     one = str(tmp_path / "data/long/a.off")
     out = runner.invoke(main, ["compute", one, "--descriptor", "rigid", "--save", str(tmp_path)])
