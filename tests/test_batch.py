@@ -121,12 +121,13 @@ def _start(args: list[str], env: dict) -> subprocess.Popen:
 
 
 def _stop(procs: list[subprocess.Popen]) -> None:
-    """Terminate the process groups, then kill what is left after a grace period."""
+    """Terminate the process groups, then kill what is left after a grace period (a nanny
+    restarting a crashed worker can ignore SIGTERM for many seconds)."""
     for proc in procs:
         os.killpg(proc.pid, signal.SIGTERM)
     for proc in procs:
         try:
-            proc.wait(timeout=10)
+            proc.wait(timeout=2)
         except subprocess.TimeoutExpired:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()

@@ -23,7 +23,7 @@ from tests.helpers import open_writer, random_signature
 @pytest.fixture(scope="module")
 def meshes(tmp_path_factory):
     folder = tmp_path_factory.mktemp("kill") / "meshes"
-    make_demo_collection(folder, per_class=10)
+    make_demo_collection(folder, per_class=5)
     return folder
 
 
