@@ -10,7 +10,7 @@ invariant to scale, rigid motion and (as far as the mesh's curvature is) isometr
 Unlike the spectrum it needs no eigenproblem. Each scale's system is solved by conjugate
 gradients with a diagonal preconditioner, started from the previous scale's solution: ``M +
 tau (-L)`` is well conditioned at scales near the mesh's resolution, so this costs a fraction
-of a sparse factorisation (docs/method.md, sections 10 and 13); a system it does not solve
+of a sparse factorisation (docs/method.md, "How it is computed"); a system it does not solve
 within `CG_ITERATIONS` is factorised instead.
 """
 

@@ -26,7 +26,7 @@ _TOLERANCE = 1e-8
 _CHECK_TOLERANCE = 1e-3  # the quick search for a missed copy of a repeated eigenvalue
 _BREAKDOWN = 1e-10  # a step this small against the largest diagonal entry: an invariant space
 # The Lanczos iteration's cap, steps per eigenpair and more: about three times the most seen
-# on the shared collections (docs/method.md, section 17)
+# on the shared collections (docs/method.md, "How it is computed")
 _STEPS_PER_PAIR, _STEPS_MORE = 10, 200
 _DENSE_BELOW = 64  # vertices, and 3 per eigenpair: smaller problems are solved densely
 
@@ -182,8 +182,8 @@ def lanczos(
     The Krylov basis grows one vector per application of the operator and is kept orthonormal
     against all its vectors, without restarts: for a few dozen eigenpairs of a mesh's inverse
     Laplacian this costs about as many applications as ARPACK's implicitly restarted
-    iteration, without ARPACK's own work between them (docs/method.md, section 17). The Ritz
-    pairs of the tridiagonal projection are checked when their residuals, falling
+    iteration, without ARPACK's own work between them (docs/method.md, "How it is computed").
+    The Ritz pairs of the tridiagonal projection are checked when their residuals, falling
     geometrically, are predicted to have converged.
 
     One Krylov space holds one copy of each repeated eigenvalue. A space that becomes invariant

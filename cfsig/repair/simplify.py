@@ -1,10 +1,9 @@
 """Simplified copies of a mesh, by quadric edge collapses (fast-simplification).
 
 The low Laplace-Beltrami spectrum barely moves when a mesh is simplified to a few thousand
-faces, while its cost falls with the number of vertices; `cfsig.descriptors.intrinsic` (versions 4
-and 5)
-computes the spectrum and the heat kernel signature on such a copy (docs/method.md, section
-12). The repair stage's proxy (`cfsig.repair.stage`) is simplified the same way.
+faces, while its cost falls with the number of vertices; `cfsig.descriptors.intrinsic` computes
+its channels on such a copy (docs/method.md, "How it is computed"). The repair stage's proxy
+(`cfsig.repair.proxy`) is simplified the same way beyond 40,000 faces.
 """
 
 from __future__ import annotations
@@ -58,8 +57,8 @@ def simplified_mesh(mesh: Mesh, count: int) -> Mesh | None:
     -------
     copy : Mesh or None
         The simplified copy, checked by `cfsig.files.mesh.clean_mesh`; None when the mesh has at
-        most
-        ``count`` faces (nothing to simplify) or the simplification leaves no usable triangle.
+        most ``count`` faces (nothing to simplify) or the simplification leaves no usable
+        triangle.
     """
     if len(mesh.faces) <= count:
         return None

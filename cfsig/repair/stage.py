@@ -4,7 +4,7 @@ The conformal factor is defined on a closed manifold (paper section 2); on a mod
 separate parts it is solved per part, and each part gets an unrelated distribution (the paper's
 "most important drawback", section 4). `repair_mesh` runs between reading (`cfsig.files.mesh`, which
 always welds, drops duplicates and degenerate faces and splits non-manifold vertices) and the
-numerics, and chooses one of three routes (docs/method.md, section 1b):
+numerics, and chooses one of three routes (docs/method.md, "The repair stage"):
 
 - ``clean``: the mesh is one closed manifold; it passes unchanged, bit for bit.
 - ``repaired``: local repairs make it closed manifold parts, for any amount of damage: fins,
@@ -94,7 +94,7 @@ def repair_mesh(mesh: Mesh, mode: str = "auto", limits: Limits | None = None) ->
 
 def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
     """Resolve non-manifold edges, trim overlaps, stitch, drop fragments, fill holes, orient,
-    drop inner parts and join crossing ones (docs/method.md, section 1b).
+    drop inner parts and join crossing ones (docs/method.md, "The repair stage").
 
     Returns None, for the proxy, beyond `MAX_PARTS` parts, when the union's child fails or
     when the result is not closed.

@@ -87,11 +87,11 @@ def cell_scores(
     For a share ``f``, with the part's histogram ``p`` and a whole's ``w`` (each of mass 1),
     ``(1 - sum(min(f p, w)) / f) + sum(|p - w|)``: the unexplained share plus the L1 distance,
     `cfsig.search.partial.partial_scores` with weight 1; the smallest over the shares. Both terms
-    are
-    summed in integers, on the fractions in units of ``1 / UNIT`` (`area_units`; method.md,
-    section 19): ``1 - E / F`` and ``(P + W - 2 C) / UNIT``, with ``E`` and ``C`` the sums of
-    ``min(f p, w)`` and ``min(p, w)``, ``F`` and ``P`` those of ``f p`` and ``p``, ``W`` that
-    of ``w``; `cfsig.search.cells_compiled` computes the same numbers.
+    are summed in integers, on the fractions in units of ``1 / UNIT`` (`area_units`;
+    docs/method.md, "Fine curvature cells"): ``1 - E / F`` and ``(P + W - 2 C) / UNIT``, with
+    ``E`` and ``C`` the sums of ``min(f p, w)`` and ``min(p, w)``, ``F`` and ``P`` those of
+    ``f p`` and ``p``, ``W`` that of ``w``; `cfsig.search.cells_compiled` computes the same
+    numbers.
 
     Parameters
     ----------
