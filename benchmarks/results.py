@@ -1,7 +1,7 @@
 """Retrieval measures of cfsig's descriptors on labelled collections: docs/results.md.
 
     python benchmarks/results.py --data-root DATA [--doc docs/results.md]
-        [--collections shrec07,mcgill,faust,psb-train] [--jobs N] [--every K]
+        [--collections shrec07,mcgill,faust] [--jobs N] [--every K]
 
 ``DATA/NAME/<class>/<file>.off`` holds each collection (``../shared/data/unpack all DATA``);
 ``--every K`` takes every k-th mesh in sorted order (a quick look).
@@ -9,7 +9,9 @@
 Whole shapes: for each collection, ``cf`` and ``intrinsic`` signatures of every mesh
 (`cfsig.compute_collection`), ranked leave-one-out (`cfsig.evaluate_collections`): NN, FT, ST,
 DCG, mAP and the median wall seconds per mesh (reading included, in a worker). The classes
-are the folders, or for ``psb-train`` PSB's own ``DATA/psb-train.cla`` when it is there.
+are the folders, or for ``psb-train`` (not measured by default: ``benchmarks/peers.py``
+measures it beside the descriptors for rigid objects) PSB's own ``DATA/psb-train.cla`` when it
+is there.
 
 Partial queries (shrec07, mcgill, faust): each mesh at sorted position i gives three parts, made
 in this order from ``np.random.default_rng(i)``:
@@ -52,7 +54,7 @@ from cfsig.files.demo import write_off
 from cfsig.files.mesh import Mesh, clean_mesh
 from cfsig.repair.simplify import decimate
 
-COLLECTIONS = ("shrec07", "mcgill", "faust", "psb-train")
+COLLECTIONS = ("shrec07", "mcgill", "faust")
 PARTIAL = ("shrec07", "mcgill", "faust")
 DESCRIPTORS = ("cf", "intrinsic")
 WHOLE_MEASURES = ("NN", "FT", "ST", "DCG", "mAP")
