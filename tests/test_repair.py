@@ -235,6 +235,28 @@ def test_fin_and_stray_fragment_are_dropped():
     np.testing.assert_allclose(fixed.phi, clean.phi, rtol=0, atol=1e-9)
 
 
+def _panels(count, size):
+    """``count`` open square panels of side ``size`` (two triangles each), side by side in a row
+    above the unit sphere, a little apart."""
+    vertices, faces = [], []
+    for i in range(count):
+        x = -1 + i * 1.5 * size
+        vertices += [[x, 0, 1.2], [x + size, 0, 1.2], [x, size, 1.2], [x + size, size, 1.2]]
+        faces += [[4 * i, 4 * i + 1, 4 * i + 3], [4 * i, 4 * i + 3, 4 * i + 2]]
+    return np.array(vertices, float), np.array(faces)
+
+
+def test_open_fragments_that_add_up_are_the_objects_parts():
+    v, f = SPHERE
+    area = 4 * np.pi  # the sphere's, about
+    for count, route in ((1, "repaired"), (12, "proxy")):
+        pv, pf = _panels(count, np.sqrt(0.004 * area))  # each 0.4% of the area
+        repaired = repair_mesh(clean_mesh(np.vstack([v, pv]), np.vstack([f, pf + len(v)])))
+        assert repaired.route == route
+        kept = np.any(np.abs(repaired.vertices[:, 2] - 1.2) < 0.1)  # the panels, as slabs
+        assert kept == (route == "proxy")
+
+
 def test_too_many_parts_go_to_the_proxy(monkeypatch):
     monkeypatch.setattr(repair, "MAX_PARTS", 1)
     result = repair_mesh(clean_mesh(*_fin_and_stray()))  # two parts: finned sphere, stray

@@ -44,7 +44,8 @@ from cfsig.repair.proxy import proxy_mesh
 STITCH_DISTANCE = 0.02
 # A part's faces within this fraction of the diagonal of a larger part's surface cover it twice.
 OVERLAP_DISTANCE = 0.002
-# Open parts with less than this fraction of the total area are fragments, dropped.
+# Open parts with less than this fraction of the total area are fragments, dropped, as long
+# as they hold no more than this fraction together.
 FRAGMENT_AREA = 0.01
 # Local repairs are tried on at most this many parts; beyond, the proxy is built directly.
 MAX_PARTS = 256
@@ -96,8 +97,9 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
     """Resolve non-manifold edges, trim overlaps, stitch, drop fragments, fill holes, orient,
     drop inner parts and join crossing ones (docs/method.md, "The repair stage").
 
-    Returns None, for the proxy, beyond `MAX_PARTS` parts, when the union's child fails or
-    when the result is not closed.
+    Returns None, for the proxy, beyond `MAX_PARTS` parts, when the open fragments hold more
+    than `FRAGMENT_AREA` of the area together, when the union's child fails or when the result
+    is not closed.
     """
     done = list(mesh.repairs)
     vertices, faces = weld_copies(mesh.vertices, mesh.faces)
@@ -126,7 +128,10 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
     vertices, faces, stitched = stitch(vertices, faces, edges, STITCH_DISTANCE * diagonal)
     if stitched:
         done.append(f"stitched {stitched} pairs of boundary vertices between parts")
-    vertices, faces, dropped = drop_fragments(*_tidy(vertices, faces), FRAGMENT_AREA)
+    kept = drop_fragments(*_tidy(vertices, faces), FRAGMENT_AREA)
+    if kept is None:
+        return None
+    vertices, faces, dropped = kept
     if dropped:
         done.append(f"dropped {dropped} small open fragments")
     vertices, faces, edges = _tidy(vertices, faces)
@@ -329,8 +334,9 @@ def _seeds(
 
 def drop_fragments(
     vertices: np.ndarray, faces: np.ndarray, edges: Edges | None, fraction: float
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """Drop open parts whose area is below a fraction of the total.
+) -> tuple[np.ndarray, np.ndarray, int] | None:
+    """Drop open parts whose area is below a fraction of the total, unless together they hold
+    more than that fraction: they are then the object's parts (slats, panels), not strays.
 
     Parameters
     ----------
@@ -341,7 +347,8 @@ def drop_fragments(
     edges : geometry.Edges or None
         The faces' `cfsig.files.elements.mesh_edges` when already known (`clean_mesh` keeps them).
     fraction : float
-        Area fraction below which an open part is dropped.
+        Area fraction below which an open part is dropped, and that the dropped parts may
+        hold together.
 
     Returns
     -------
@@ -351,6 +358,8 @@ def drop_fragments(
         The faces kept.
     dropped : int
         Number of parts dropped.
+
+    None when the parts to drop hold more than ``fraction`` of the area together.
     """
     edges, n_parts, labels = _face_graph(faces, len(vertices), edges)
     face_part = labels[faces[:, 0]]
@@ -360,6 +369,8 @@ def drop_fragments(
     drop = open_part & (area < fraction * area.sum())
     if not drop.any() or drop.all():
         return vertices, faces, 0
+    if area[drop].sum() > fraction * area.sum():
+        return None
     return vertices, faces[~drop[face_part]], int(drop.sum())
 
 
