@@ -44,21 +44,22 @@ def main() -> None:
             print(f"skipped ({name}): {line}")
     classes = cfsig.read_cla(args.cla) if args.cla else None
     results = cfsig.evaluate_collections(collections, classes)
-    drawn = args.classes.split(",") if args.classes else None
-    problems = write_comparison(args.out, results, drawn)
     first = next(iter(results.values())).report
+    asked = args.classes.split(",") if args.classes else list(first.per_class)
+    drawn = [cls for cls in asked if cls in first.per_class]
     print(f"Measured by `{command('peers.py')}`: {first.count} queries.\n")
     rows = [
         [f"`{name}`", *(f"{r.report.measures[m]:.3f}" for m in MEASURES), r.seconds_per_mesh]
         for name, r in results.items()
     ]
-    print(table(["descriptor", *MEASURES, "s per mesh"], rows), end="\n\n")
+    print(table(["descriptor", *MEASURES, "s per mesh"], rows), end="\n\n", flush=True)
     per_class = [
-        [cls, *(f"{r.report.per_class[cls]['FT']:.3f}" for r in results.values())]
-        for cls in drawn or first.per_class
+        [cls, *(f"{r.report.per_class[cls]['FT']:.3f}" for r in results.values())] for cls in drawn
     ]
-    print(table(["class (FT)", *(f"`{name}`" for name in results)], per_class))
-    for line in problems:
+    print(table(["class (FT)", *(f"`{name}`" for name in results)], per_class), flush=True)
+    for cls in sorted(set(asked) - set(drawn)):
+        print(f"not drawn: no class {cls} among the queries")
+    for line in write_comparison(args.out, results, drawn):
         print(f"not drawn: {line}")
 
 
