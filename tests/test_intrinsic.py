@@ -43,14 +43,17 @@ def _vector(v, f, params=DEFAULT):
 
 @pytest.mark.parametrize("name", sorted(GOLDEN_MESHES))
 def test_golden_vectors(name):
-    """Both descriptors, and the fine cells, bit for bit as they were released."""
+    """Both descriptors, and the fine cells, as they were released: bit for bit, but for the
+    default's vector, whose Lanczos sums round differently with other processors and BLAS
+    builds (by at most 1e-12, measured on another machine): within 1e-10, far below what any
+    change of the method moves."""
     golden = np.load(GOLDEN)
     mesh = clean_mesh(*GOLDEN_MESHES[name]())
     assert np.array_equal(
         _vector(mesh.vertices, mesh.faces, Params(descriptor="cf")), golden[f"{name}_cf"]
     )
     sig = compute_signature(mesh, Params(partial_cells=True))
-    assert np.array_equal(sig.vector, golden[f"{name}_default"])
+    np.testing.assert_allclose(sig.vector, golden[f"{name}_default"], rtol=0, atol=1e-10)
     assert sig.cells is not None
     assert np.array_equal(sig.cells[0], golden[f"{name}_cells"])
     assert np.array_equal(sig.cells[1], golden[f"{name}_cell_fractions"])

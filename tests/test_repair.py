@@ -56,6 +56,13 @@ def _has(mesh_or_sig, words: str) -> bool:
     return any(words in r for r in mesh_or_sig.repairs)
 
 
+def _area(mesh: Mesh) -> float:
+    v, f = mesh.vertices, mesh.faces
+    return float(
+        np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum() / 2
+    )
+
+
 def _stack(*parts):
     """One mesh of several (vertices, faces) parts, each with its own vertices."""
     offsets = np.cumsum([0] + [len(v) for v, _ in parts[:-1]])
@@ -177,10 +184,44 @@ def test_open_parts_too_far_apart_are_each_closed():
     result = repair_mesh(mesh, "auto")
     assert not _has(result, "stitched") and _has(result, "closed 2 holes")
     assert result.route == "repaired" and _is_closed(result) and _components(result) == 2
-    # Each part keeps its faces as read, plus a fan over its cut.
+    # Each part keeps its faces as read, plus n - 2 triangles over its cut of n vertices.
     assert len(result.faces) == len(f) + sum(
-        len(boundary_loops(mesh_edges(part, len(v)), len(v))[0]) for part in (a, b)
+        len(boundary_loops(mesh_edges(part, len(v)), len(v))[0]) - 2 for part in (a, b)
     )
+    assert len(result.vertices) == len(mesh.vertices)
+
+
+def _tube(rings: int = 20, around: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """A closed cylinder of radius 1 and height 2: ``rings`` rings of ``around`` vertices, and
+    a fan at each end."""
+    angle = 2 * np.pi * np.arange(around) / around
+    z = np.linspace(-1, 1, rings)
+    ring = np.column_stack([np.cos(angle), np.sin(angle)])
+    side = np.vstack([np.column_stack([ring, np.full(around, h)]) for h in z])
+    v = np.vstack([side, [[0, 0, -1], [0, 0, 1]]])
+    j, k = np.meshgrid(np.arange(rings - 1), np.arange(around), indexing="ij")
+    a, b = j * around + k, j * around + (k + 1) % around
+    c, d = a + around, b + around
+    quads = np.vstack([np.stack([a, b, d], axis=-1), np.stack([a, d, c], axis=-1)])
+    bottom = np.column_stack(
+        [np.full(around, len(v) - 2), np.roll(np.arange(around), -1), np.arange(around)]
+    )
+    top = (rings - 1) * around + np.arange(around)
+    top = np.column_stack([np.full(around, len(v) - 1), top, np.roll(top, -1)])
+    return v, np.vstack([quads.reshape(-1, 3), bottom, top])
+
+
+def test_a_curved_slit_is_zipped_not_spanned():
+    # A slit half way round a tube: one band of faces removed. A fan from the slit's centroid,
+    # which lies inside the tube, would add about the area of a disc; the ears add back about
+    # the band's.
+    v, f = _tube()
+    centroids = v[f].mean(axis=1)
+    band = (np.abs(centroids[:, 2]) < 1 / 19) & (centroids[:, 1] > 0)
+    kept = clean_mesh(v, f[~band])
+    result = repair_mesh(kept, "auto")
+    assert result.route == "repaired" and _has(result, "closed 1 holes") and _is_closed(result)
+    assert _area(result) == pytest.approx(_area(Mesh(v, f)), rel=0.01)
 
 
 def test_overlapping_parts_are_trimmed():

@@ -19,6 +19,7 @@ numerics, and chooses one of three routes (docs/method.md, "The repair stage"):
 
 from __future__ import annotations
 
+import heapq
 from dataclasses import replace
 
 import numpy as np
@@ -377,7 +378,12 @@ def drop_fragments(
 def fill_holes(
     vertices: np.ndarray, faces: np.ndarray, edges: Edges | None = None
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Close every boundary loop: a triangle for a loop of three, else a fan from its centroid.
+    """Close every boundary loop by clipping ears, the shortest new edge first.
+
+    A slit between two boundaries that were not stitched closes as a zip of thin triangles; a
+    fan from the loop's centroid would span a curved slit with large ones (docs/method.md).
+    An ear whose new edge the mesh already has is not clipped; what no ear can close is closed
+    by a fan from its centroid.
 
     Parameters
     ----------
@@ -392,24 +398,72 @@ def fill_holes(
     Returns
     -------
     vertices : (n + h, 3) float64
-        With one new vertex at the centroid of each loop longer than three.
+        With a new vertex at the centroid of each of the h loops no ear could close.
     faces : (m + k, 3) int64
-        With the new triangles.
+        With the new triangles, oriented as the loop's faces.
     filled : int
         Number of loops closed.
     """
-    loops = boundary_loops(_face_graph(faces, len(vertices), edges)[0], len(vertices))
+    edges = _face_graph(faces, len(vertices), edges)[0]
+    loops = boundary_loops(edges, len(vertices))
+    if not loops:
+        return vertices, faces, 0
+    on_loop = np.zeros(len(vertices), dtype=bool)
+    on_loop[np.concatenate(loops)] = True
+    near = edges.ends[on_loop[edges.ends].all(axis=1)]
+    taken = set(map(tuple, near.tolist()))  # (i, j), i < j
     new_vertices, new_faces = [vertices], [faces]
-    count = len(vertices)
     for loop in loops:
-        if len(loop) == 3:
-            new_faces.append(loop[None, :])
-            continue
-        new_vertices.append(vertices[loop].mean(axis=0, keepdims=True))
-        fan = np.column_stack([np.full(len(loop), count), loop, np.roll(loop, -1)])
-        new_faces.append(fan)
-        count += 1
+        triangles, rest = _clip_ears(vertices, loop.tolist(), taken)
+        if len(rest) > 3:
+            centre = len(vertices) + len(new_vertices) - 1
+            new_vertices.append(vertices[rest].mean(axis=0, keepdims=True))
+            triangles += [
+                (centre, a, b) for a, b in zip(rest, np.roll(rest, -1).tolist(), strict=True)
+            ]
+        else:
+            triangles.append((rest[0], rest[1], rest[2]))
+        new_faces.append(np.array(triangles, dtype=faces.dtype).reshape(-1, 3))
     return np.vstack(new_vertices), np.vstack(new_faces), len(loops)
+
+
+def _clip_ears(
+    vertices: np.ndarray, loop: list[int], taken: set[tuple[int, int]]
+) -> tuple[list[tuple[int, int, int]], list[int]]:
+    """`fill_holes`' ears of one loop, shortest new edge first, none on an edge in ``taken``
+    (to which the new edges are added); and the loop left, in order, once no ear is left."""
+    count = len(loop)
+    before, after = np.roll(np.arange(count), 1), np.roll(np.arange(count), -1)
+    alive = np.ones(count, dtype=bool)
+    points = vertices[loop]
+
+    def key(i: int) -> float:
+        return float(np.linalg.norm(points[after[i]] - points[before[i]]))
+
+    heap = [(key(i), i) for i in range(count)]
+    heapq.heapify(heap)
+    triangles: list[tuple[int, int, int]] = []
+    while count > 3 and heap:
+        length, i = heapq.heappop(heap)
+        if not alive[i] or length != key(i):
+            continue  # clipped, or its neighbours changed since it was pushed
+        a, b = loop[before[i]], loop[after[i]]
+        edge = (min(a, b), max(a, b))
+        if edge in taken:
+            continue  # pushed again when a neighbour is clipped
+        taken.add(edge)
+        triangles.append((a, loop[i], b))
+        alive[i] = False
+        count -= 1
+        after[before[i]], before[after[i]] = after[i], before[i]
+        for j in (before[i], after[i]):
+            heapq.heappush(heap, (key(j), j))
+    start = int(np.flatnonzero(alive)[0])
+    rest, i = [], start
+    for _ in range(count):
+        rest.append(loop[i])
+        i = after[i]
+    return triangles, rest
 
 
 def boundary_loops(edges: Edges, n_vertices: int) -> list[np.ndarray]:
