@@ -158,6 +158,16 @@ def test_parts_with_a_small_gap_are_zipped(shape):
     assert not _has(repaired, "holes") and not _has(repaired, "fragments")
 
 
+def test_parts_moved_apart_come_back_whole():
+    # Each part moves back as a whole, not only its seam: the shape is the original, moved.
+    v, f = SPHERE
+    repaired = repair_mesh(clean_mesh(*_gapped(v, f)))
+    assert _one_closed_manifold(repaired) and len(repaired.vertices) == len(v)
+    moved = repaired.vertices - repaired.vertices.mean(axis=0)
+    off = np.linalg.norm(moved[:, None] - (v - v.mean(axis=0))[None], axis=2).min(axis=1)
+    assert off.max() < 1e-9 * _diagonal(v)
+
+
 def test_zipped_sphere_signature_is_close_to_the_intact_one():
     v, f = SPHERE
     mesh = clean_mesh(*_gapped(v, f))

@@ -269,7 +269,11 @@ def stitch(
     following, preceding = np.full(n, -1), np.full(n, -1)
     for loop in loops:
         following[loop], preceding[loop] = np.roll(loop, -1), np.roll(loop, 1)
-    seeds, shift = _seeds(vertices, labels, np.concatenate(loops), distance)
+    candidates = np.concatenate(loops)
+    seeds, shift, support = _seeds(vertices, labels, candidates, distance)
+    if shift:
+        vertices = _aligned(vertices, labels, shift, support)
+        seeds, shift, _ = _seeds(vertices, labels, candidates, distance)
 
     def gap(x: int, y: int) -> float:
         """The distance of x and y once y's part is moved back onto x's."""
@@ -302,8 +306,9 @@ def stitch(
 
 def _seeds(
     vertices: np.ndarray, labels: np.ndarray, candidates: np.ndarray, distance: float
-) -> tuple[list[tuple[int, int]], dict[tuple[int, int], np.ndarray]]:
-    """Candidate pairs for `stitch`, and the shift between each two parts that meet.
+) -> tuple[list[tuple[int, int]], dict[tuple[int, int], np.ndarray], dict[tuple[int, int], int]]:
+    """Candidate pairs for `stitch`, the shift between each two parts that meet, and the
+    number of pairs it was measured on.
 
     Each boundary vertex is paired with its nearest few on other parts within ``distance``.
     Parts of a model that were moved apart keep the vertices of their seam in step, so each
@@ -322,15 +327,40 @@ def _seeds(
     keep = (a < b) & (labels[a] != labels[b])
     a, b = a[keep], b[keep]
     shift: dict[tuple[int, int], np.ndarray] = {}
+    support: dict[tuple[int, int], int] = {}
     for pa, pb in set(zip(labels[a].tolist(), labels[b].tolist(), strict=True)):
         mine = (labels[a] == pa) & (labels[b] == pb)
         offset = np.median(vertices[b[mine]] - vertices[a[mine]], axis=0)
         shift[(pa, pb)], shift[(pb, pa)] = offset, -offset
+        support[(pa, pb)] = int(mine.sum())
     pairs = zip(labels[a].tolist(), labels[b].tolist(), strict=True)
     offsets = np.array([shift[key] for key in pairs])
     residual = np.linalg.norm(vertices[b] - offsets.reshape(-1, 3) - vertices[a], axis=1)
     order = np.argsort(residual, kind="stable")
-    return list(zip(a[order].tolist(), b[order].tolist(), strict=True)), shift
+    return list(zip(a[order].tolist(), b[order].tolist(), strict=True)), shift, support
+
+
+def _aligned(
+    vertices: np.ndarray,
+    labels: np.ndarray,
+    shift: dict[tuple[int, int], np.ndarray],
+    support: dict[tuple[int, int], int],
+) -> np.ndarray:
+    """The vertices with each part that meets another moved back by a translation ``t``: the
+    least-squares solution of ``t_b - t_a = shift[a, b]`` over the pairs of parts, each
+    weighted by its number of pairs, the smallest such (parts moved apart together come back
+    together; docs/method.md)."""
+    parts = sorted({p for pair in support for p in pair})
+    column = {p: i for i, p in enumerate(parts)}
+    system = np.zeros((len(support), len(parts)))
+    target = np.empty((len(support), 3))
+    for row, ((pa, pb), count) in enumerate(support.items()):
+        weight = np.sqrt(count)
+        system[row, column[pb]], system[row, column[pa]] = weight, -weight
+        target[row] = weight * shift[(pa, pb)]
+    moves = np.zeros((int(labels.max()) + 1, 3))
+    moves[parts] = np.linalg.lstsq(system, target, rcond=None)[0]
+    return vertices - moves[labels]
 
 
 def drop_fragments(
