@@ -235,7 +235,8 @@ def stitch(
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Zip together the boundaries of different parts that run side by side.
 
-    Seeds are pairs of boundary vertices of different parts within ``distance``, shortest
+    Seeds are pairs of boundary vertices of different parts within ``distance``; the parts
+    they join are first moved back together (`_aligned`), then the seeds are taken shortest
     first, each vertex paired at most once. From each seed the two boundaries are walked in
     step, both ways, pairing vertex after vertex while each next pair is within ``distance``
     and on two parts. Each pair is merged at its midpoint.
@@ -254,7 +255,8 @@ def stitch(
     Returns
     -------
     vertices : (n, 3) float64
-        With each merged pair's first vertex moved to the midpoint.
+        Each part that meets another moved by its translation, then each merged pair's first
+        vertex moved to the midpoint.
     faces : (m, 3) int64
         With each pair's second vertex replaced by its first (unreferenced vertices and faces
         that became degenerate are left for `clean_mesh`).
