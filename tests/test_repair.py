@@ -13,14 +13,14 @@ from cfsig.batch import compute_many
 from cfsig.cli import main
 from cfsig.descriptors.signature import compute_signature, signature_file
 from cfsig.errors import MeshError, StageLimitError
-from cfsig.files.elements import mesh_edges
+from cfsig.files.elements import edge_lengths, face_areas, mesh_edges
 from cfsig.files.mesh import Mesh, clean_mesh
 from cfsig.isolate import Limits
 from cfsig.params import Params
 from cfsig.repair import proxy as proxy_module
 from cfsig.repair import stage as repair
 from cfsig.repair.stage import boundary_loops, repair_mesh
-from tests.helpers import icosphere, torus, write_off
+from tests.helpers import icosphere, open_cylinder, torus, write_off
 from tests.helpers import l1 as _l1
 
 SPHERE = icosphere(3)
@@ -57,10 +57,7 @@ def _has(mesh_or_sig, words: str) -> bool:
 
 
 def _area(mesh: Mesh) -> float:
-    v, f = mesh.vertices, mesh.faces
-    return float(
-        np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum() / 2
-    )
+    return float(face_areas(edge_lengths(mesh.vertices, mesh.faces)).sum())
 
 
 def _stack(*parts):
@@ -202,23 +199,15 @@ def test_open_parts_too_far_apart_are_each_closed():
 
 
 def _tube(rings: int = 20, around: int = 32) -> tuple[np.ndarray, np.ndarray]:
-    """A closed cylinder of radius 1 and height 2: ``rings`` rings of ``around`` vertices, and
-    a fan at each end."""
-    angle = 2 * np.pi * np.arange(around) / around
-    z = np.linspace(-1, 1, rings)
-    ring = np.column_stack([np.cos(angle), np.sin(angle)])
-    side = np.vstack([np.column_stack([ring, np.full(around, h)]) for h in z])
-    v = np.vstack([side, [[0, 0, -1], [0, 0, 1]]])
-    j, k = np.meshgrid(np.arange(rings - 1), np.arange(around), indexing="ij")
-    a, b = j * around + k, j * around + (k + 1) % around
-    c, d = a + around, b + around
-    quads = np.vstack([np.stack([a, b, d], axis=-1), np.stack([a, d, c], axis=-1)])
-    bottom = np.column_stack(
-        [np.full(around, len(v) - 2), np.roll(np.arange(around), -1), np.arange(around)]
+    """A closed cylinder of radius 1 from z = -1 to 1: `open_cylinder` with a fan at each end."""
+    v, f = open_cylinder(around, rings)
+    v = np.vstack([v - [0, 0, 1], [[0, 0, -1], [0, 0, 1]]])
+    ring = np.arange(around) * rings  # the vertices at z = -1; those at z = 1 follow each
+    bottom = np.column_stack([np.full(around, len(v) - 2), np.roll(ring, -1), ring])
+    top = np.column_stack(
+        [np.full(around, len(v) - 1), ring + rings - 1, np.roll(ring, -1) + rings - 1]
     )
-    top = (rings - 1) * around + np.arange(around)
-    top = np.column_stack([np.full(around, len(v) - 1), top, np.roll(top, -1)])
-    return v, np.vstack([quads.reshape(-1, 3), bottom, top])
+    return v, np.vstack([f, bottom, top])
 
 
 def test_a_curved_slit_is_zipped_not_spanned():
