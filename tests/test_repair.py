@@ -117,6 +117,21 @@ def test_clean_torus_is_untouched():
         assert _unchanged(repair_mesh(mesh, mode), mesh)
 
 
+@pytest.mark.parametrize("share", [0.05, 1.0])
+def test_reversed_faces_are_turned_back(share):
+    """Some or all faces of a closed mesh reversed: the clean mesh again, and its signature."""
+    v, f = SPHERE
+    flip = np.random.default_rng(0).random(len(f)) < share
+    flipped = f.copy()
+    flipped[flip] = f[flip][:, ::-1]
+    result = repair_mesh(clean_mesh(v, flipped))
+    assert result.route == "repaired" and _has(result, f"reversed {flip.sum()} faces")
+    assert np.array_equal(result.vertices, v) and np.array_equal(result.faces, f)
+    params = Params(descriptor="intrinsic")
+    original = compute_signature(clean_mesh(v, f), params).vector
+    assert np.array_equal(compute_signature(clean_mesh(v, flipped), params).vector, original)
+
+
 # -- repaired ---------------------------------------------------------------------------------
 
 

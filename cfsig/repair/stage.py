@@ -6,10 +6,11 @@ separate parts it is solved per part, and each part gets an unrelated distributi
 always welds, drops duplicates and degenerate faces and splits non-manifold vertices) and the
 numerics, and chooses one of three routes (docs/method.md, "The repair stage"):
 
-- ``clean``: the mesh is one closed manifold; it passes unchanged, bit for bit.
+- ``clean``: the mesh is one closed manifold, oriented outward; it passes unchanged, bit for
+  bit.
 - ``repaired``: local repairs make it closed manifold parts, for any amount of damage: fins,
   dangling sheets and inner walls on non-manifold edges are dropped, T-junctions split, parts
-  whose boundaries nearly meet stitched, small open fragments dropped, holes closed by fans,
+  whose boundaries nearly meet stitched, small open fragments dropped, holes closed by ears,
   parts oriented, parts enclosed by another dropped and parts crossing another joined by their
   union (`cfsig.repair.local`); closed parts apart are kept. The rest of the surface is kept
   exactly.
@@ -35,6 +36,7 @@ from cfsig.repair.local import (
     closed_parts,
     drop_dangling,
     orient_parts,
+    signed_volumes,
     split_t_junctions,
     weld_copies,
 )
@@ -83,7 +85,7 @@ def repair_mesh(mesh: Mesh, mode: str = "auto", limits: Limits | None = None) ->
     if mode not in REPAIR_MODES:
         raise ValueError(f"unknown repair mode {mode!r}; choose from {', '.join(REPAIR_MODES)}")
     n_parts, labels, closed = _surface(mesh)
-    if n_parts == 1 and closed:
+    if n_parts == 1 and closed and _oriented_outward(mesh):
         return replace(mesh, parts=labels)
     if mode == "off":
         return replace(mesh, route="unrepaired")
@@ -140,7 +142,11 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
     if filled:
         done.append(f"closed {filled} holes")
     vertices, faces, edges = _tidy(vertices, faces)
-    faces = orient_parts(vertices, faces)
+    oriented = orient_parts(vertices, faces)
+    reversed_faces = int(np.count_nonzero(np.any(oriented != faces, axis=1)))
+    if reversed_faces:
+        done.append(f"reversed {reversed_faces} faces to orient every part outward")
+    faces = oriented
     labels = _face_graph(faces, len(vertices), edges)[2]
     try:
         vertices, faces, enclosed, joined, refused = closed_parts(vertices, faces, labels, limits)
@@ -556,6 +562,16 @@ def _surface(mesh: Mesh) -> tuple[int, np.ndarray, bool]:
     """A mesh's number of parts, the part of each vertex, and whether every edge has two faces."""
     edges, n_parts, labels = _face_graph(mesh.faces, len(mesh.vertices), mesh.edges)
     return n_parts, labels, bool(np.all(np.diff(edges.starts) == 2))
+
+
+def _oriented_outward(mesh: Mesh) -> bool:
+    """Whether the two faces of each edge of a closed mesh run along it in opposite directions,
+    and the faces enclose a positive volume."""
+    edges = mesh.edges if mesh.edges is not None else mesh_edges(mesh.faces, len(mesh.vertices))
+    start = mesh.faces.ravel()[edges.order]  # the vertex each face leaves the edge from
+    if np.any(start[0::2] == start[1::2]):
+        return False
+    return bool(signed_volumes(mesh.vertices, mesh.faces).sum() > 0)
 
 
 def _face_graph(
