@@ -37,10 +37,40 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, count: int) -> tuple[np.nd
         return np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
     import fast_simplification
 
+    # The collapses' order, and so the copy, depend on the numbering: the same surface read
+    # from two files must give the same copy.
+    vertices, faces = canonical_numbering(np.asarray(vertices, dtype=np.float64), faces)
     vertices, faces = fast_simplification.simplify(
-        np.asarray(vertices, dtype=np.float64), faces.astype(np.int32), target_count=count
+        vertices, faces.astype(np.int32), target_count=count
     )
     return np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
+
+
+def canonical_numbering(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The same triangles, numbered by position rather than as a file happened to list them.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        Vertex positions.
+    faces : (m, 3) int
+        Triangles.
+
+    Returns
+    -------
+    vertices : (n, 3) float64
+        The vertices sorted by x, then y, then z (coincident ones in their given order).
+    faces : (m, 3) int64
+        The triangles over the new numbering, each starting at its smallest index (so keeping
+        its orientation), sorted.
+    """
+    order = np.lexsort(vertices.T[::-1])
+    rank = np.empty(len(order), dtype=np.int64)
+    rank[order] = np.arange(len(order))
+    renumbered = rank[faces]
+    first = np.argmin(renumbered, axis=1)[:, None]
+    renumbered = np.take_along_axis(renumbered, (first + np.arange(3)) % 3, axis=1)
+    return vertices[order], renumbered[np.lexsort(renumbered.T[::-1])]
 
 
 def simplified_mesh(mesh: Mesh, count: int) -> Mesh | None:
