@@ -563,7 +563,7 @@ def evaluate(
     except ValueError as exc:  # names the file and line already
         _fail(str(exc))
     skipped: list[str] = []
-    routes: Counter[str] = Counter()  # of the first descriptor: the others' are the same
+    routes: dict[str, Counter[str]] = {}  # per descriptor: their repair modes may differ
     collections: dict[str, Collection] = {}
     try:
         if index_file:
@@ -573,9 +573,16 @@ def evaluate(
                 params = _params(
                     normalize=normalize, seed=seed, bins=bins, repair=repair, descriptor=name
                 )
-                counted = routes if not collections else Counter()
+                routes[name] = Counter()
                 collections[name] = _compute_folder(
-                    folder, params, solver, jobs, strict, skipped, counted, Limits(stage_timeout)
+                    folder,
+                    params,
+                    solver,
+                    jobs,
+                    strict,
+                    skipped,
+                    routes[name],
+                    Limits(stage_timeout),
                 )
     except CfsigError as exc:
         _fail(str(exc))
@@ -588,7 +595,7 @@ def evaluate(
         report = result.report
         if as_json:
             computed = (
-                {"repair": dict(routes), "seconds_per_mesh": result.seconds_per_mesh}
+                {"repair": dict(routes[wanted[0]]), "seconds_per_mesh": result.seconds_per_mesh}
                 if folder
                 else {}
             )
@@ -602,15 +609,16 @@ def evaluate(
             name: {
                 **r.report.to_dict(),
                 "seconds_per_mesh": r.seconds_per_mesh,
-                "repair": dict(routes),
+                "repair": dict(routes[name]),
             }
             for name, r in results.items()
         }
         click.echo(json.dumps(out, indent=2))
     else:
         click.echo(_format_side_by_side(results))
-    if routes and not as_json:
-        click.echo(_format_routes(routes))
+    for name, counted in routes.items():
+        if counted and not as_json:
+            click.echo(("" if len(routes) == 1 else f"{name} ") + _format_routes(counted))
     _evaluate_pictures(plot, report_dir, results)
     _report_skipped(skipped, strict)
 

@@ -145,9 +145,13 @@ def test_the_command_line_computes_indexes_queries_evaluates_and_checks(tmp_path
 
 
 def test_signature_goes_through_the_repair_stage():
-    """An open tube is repaired before it is measured, and measured like its repaired self."""
-    v, f = open_cylinder()
-    sig = compute_signature(clean_mesh(v, f), RIGID)
-    assert sig.route != "clean" and sig.phi is None
+    """An open tube takes the proxy, under ``auto`` as under ``proxy`` (where ``intrinsic``
+    repairs it locally), and is measured like its proxy."""
+    mesh = clean_mesh(*open_cylinder())
+    sig = compute_signature(mesh, RIGID)
+    forced = compute_signature(mesh, Params(descriptor="rigid", repair="proxy"))
+    assert sig.route == "proxy" and sig.phi is None
+    assert np.array_equal(sig.vector, forced.vector)
+    assert compute_signature(mesh, Params()).route == "repaired"
     assert sig.vector.shape == (rigid.LENGTH,) and np.isfinite(sig.vector).all()
     assert np.array_equal(sig.vector[rigid.HEAD :], np.round(sig.vector[rigid.HEAD :]))

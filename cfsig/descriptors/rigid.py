@@ -174,4 +174,5 @@ DESCRIPTOR = Descriptor(
     layout=lambda params: Layout(LENGTH),
     compute=rigid_vector,
     distance=Distance(exact=rigid_distances, bound=rigid_bounds),
+    auto_repair="proxy",  # docs/method.md: the extrinsic channels read the proxy's volume best
 )

@@ -86,7 +86,8 @@ def compute_signature(
     ----------
     mesh : Mesh
         A checked mesh, as `read_mesh` or `clean_mesh` return; it goes through
-        `cfsig.repair.stage.repair_mesh` with ``params.repair`` first.
+        `cfsig.repair.stage.repair_mesh` with ``params.repair`` first (``"auto"`` as the
+        descriptor's `Descriptor.auto_repair`).
     params : Params
         Signature parameters.
     solver : {"auto", "cholmod", "eigen", "scipy"}
@@ -115,8 +116,9 @@ def _repair_and_sign(
 ) -> tuple[Mesh, Signature]:
     """`compute_signature`, also returning the repaired mesh that phi lives on."""
     start = time.perf_counter()
-    mesh = repair_mesh(mesh, params.repair, limits)
     descriptor = descriptors.get(params.descriptor)
+    mode = descriptor.auto_repair if params.repair == "auto" else params.repair
+    mesh = repair_mesh(mesh, mode, limits)
     needs_phi = phi or descriptor.needs_phi
     cf = conformal_factor(mesh, params.mollify, solver) if needs_phi else None
     vector, cells, ops = descriptor.compute(mesh, params, cf, solver)
