@@ -569,20 +569,14 @@ def evaluate(
         if index_file:
             collections = dict([collection_from_index(index_file)])
         else:
+            limits = Limits(stage_timeout)
             for name in wanted:
                 params = _params(
                     normalize=normalize, seed=seed, bins=bins, repair=repair, descriptor=name
                 )
                 routes[name] = Counter()
                 collections[name] = _compute_folder(
-                    folder,
-                    params,
-                    solver,
-                    jobs,
-                    strict,
-                    skipped,
-                    routes[name],
-                    Limits(stage_timeout),
+                    folder, params, solver, jobs, strict, skipped, routes[name], limits
                 )
     except CfsigError as exc:
         _fail(str(exc))

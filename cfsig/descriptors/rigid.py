@@ -2,7 +2,8 @@
 extrinsic shape that the light field descriptor ``lf`` and the spherical harmonic descriptor
 ``sh`` see, together with the channels of the default descriptor ``intrinsic``.
 
-The vector holds, computed on the repaired mesh by those descriptors' own functions:
+The vector holds, computed on the repaired mesh by those descriptors' own functions (under
+``--repair auto``, the proxy for every mesh that is not clean: `DESCRIPTOR.auto_repair`):
 
 - the heat and curvature channels of the ``intrinsic`` vector
   (`cfsig.descriptors.intrinsic.intrinsic_vector`), each divided by its median in `MEDIANS`
