@@ -124,9 +124,11 @@ def test_reversed_faces_are_turned_back(share):
     flip = np.random.default_rng(0).random(len(f)) < share
     flipped = f.copy()
     flipped[flip] = f[flip][:, ::-1]
-    result = repair_mesh(clean_mesh(v, flipped))
-    assert result.route == "repaired" and _has(result, f"reversed {flip.sum()} faces")
-    assert np.array_equal(result.vertices, v) and np.array_equal(result.faces, f)
+    for mode in ("auto", "proxy"):  # turning the faces is all it needs: no proxy
+        result = repair_mesh(clean_mesh(v, flipped), mode)
+        assert result.route == "repaired" and _has(result, f"reversed {flip.sum()} faces")
+        assert np.array_equal(result.vertices, v) and np.array_equal(result.faces, f)
+    assert repair_mesh(clean_mesh(v, flipped), "off").route == "unrepaired"
     params = Params(descriptor="intrinsic")
     original = compute_signature(clean_mesh(v, f), params).vector
     assert np.array_equal(compute_signature(clean_mesh(v, flipped), params).vector, original)

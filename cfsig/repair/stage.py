@@ -7,7 +7,7 @@ always welds, drops duplicates and degenerate faces and splits non-manifold vert
 numerics, and chooses one of three routes (docs/method.md, "The repair stage"):
 
 - ``clean``: the mesh is one closed manifold, oriented outward; it passes unchanged, bit for
-  bit.
+  bit. One closed manifold with faces reversed only has them turned (route ``repaired``).
 - ``repaired``: local repairs make it closed manifold parts, for any amount of damage: fins,
   dangling sheets and inner walls on non-manifold edges are dropped, T-junctions split, parts
   whose boundaries nearly meet stitched, small open fragments dropped, holes closed by ears,
@@ -85,8 +85,15 @@ def repair_mesh(mesh: Mesh, mode: str = "auto", limits: Limits | None = None) ->
     if mode not in REPAIR_MODES:
         raise ValueError(f"unknown repair mode {mode!r}; choose from {', '.join(REPAIR_MODES)}")
     n_parts, labels, closed = _surface(mesh)
-    if n_parts == 1 and closed and _oriented_outward(mesh):
-        return replace(mesh, parts=labels)
+    if n_parts == 1 and closed:
+        if _oriented_outward(mesh):
+            return replace(mesh, parts=labels)
+        if mode != "off":  # a closed mesh with reversed faces: turning them is all it needs
+            done = list(mesh.repairs)
+            faces = _oriented(mesh.vertices, mesh.faces, done)
+            return replace(
+                mesh, faces=faces, repairs=tuple(done), edges=None, route="repaired", parts=labels
+            )
     if mode == "off":
         return replace(mesh, route="unrepaired")
     if mode == "auto":
@@ -142,11 +149,7 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
     if filled:
         done.append(f"closed {filled} holes")
     vertices, faces, edges = _tidy(vertices, faces)
-    oriented = orient_parts(vertices, faces)
-    reversed_faces = int(np.count_nonzero(np.any(oriented != faces, axis=1)))
-    if reversed_faces:
-        done.append(f"reversed {reversed_faces} faces to orient every part outward")
-    faces = oriented
+    faces = _oriented(vertices, faces, done)
     labels = _face_graph(faces, len(vertices), edges)[2]
     try:
         vertices, faces, enclosed, joined, refused = closed_parts(vertices, faces, labels, limits)
@@ -562,6 +565,15 @@ def _surface(mesh: Mesh) -> tuple[int, np.ndarray, bool]:
     """A mesh's number of parts, the part of each vertex, and whether every edge has two faces."""
     edges, n_parts, labels = _face_graph(mesh.faces, len(mesh.vertices), mesh.edges)
     return n_parts, labels, bool(np.all(np.diff(edges.starts) == 2))
+
+
+def _oriented(vertices: np.ndarray, faces: np.ndarray, done: list[str]) -> np.ndarray:
+    """`orient_parts`, noting in ``done`` how many faces it reversed."""
+    oriented = orient_parts(vertices, faces)
+    count = int(np.count_nonzero(np.any(oriented != faces, axis=1)))
+    if count:
+        done.append(f"reversed {count} faces to orient every part outward")
+    return oriented
 
 
 def _oriented_outward(mesh: Mesh) -> bool:
