@@ -46,7 +46,8 @@ class Params:
         What to do with a mesh that is not one closed manifold (one of `REPAIR_MODES`;
         `cfsig.repair.stage.repair_mesh`): ``"auto"`` repairs it locally or replaces it by a
         proxy of its outer surface, ``"proxy"`` always takes the proxy, ``"off"`` solves each
-        part as read. Clean closed manifolds are never changed.
+        part as read. A closed manifold is left as it is, but for reversed faces, which all
+        modes but ``"off"`` turn.
     partial_cells : bool
         ``intrinsic`` only: keep each mesh's fine curvature cells beside its vector, so that
         partial queries of the index rank by them (`cfsig.descriptors.cells`).

@@ -182,6 +182,28 @@ def test_parts_moved_apart_come_back_whole():
     assert off.max() < 1e-9 * _diagonal(v)
 
 
+def test_a_piece_whose_corners_are_taken_joins_in_a_later_round():
+    """A triangle whose every corner is where two other pieces meet: their pairs take each
+    corner first (the triangle's are a little off), so it is left apart in the first round of
+    stitching, and joins in the next instead of being dropped as a fragment."""
+    v, f = SPHERE
+    axis = v[f[0]].mean(axis=0)
+    across = np.cross(axis, [0.0, 0.0, 1.0])
+    basis = np.array([across, np.cross(axis, across)])
+
+    def azimuth(points):
+        return np.arctan2(*(points @ basis.T).T[::-1])
+
+    sector = np.searchsorted(np.sort(azimuth(v[f[0]])), azimuth(v[f].mean(axis=1))) % 3
+    sector[0] = 3
+    rng = np.random.default_rng(0)
+    shifts = 0.003 * _diagonal(v) * rng.normal(size=(4, 3))
+    shifts[3] += 1e-4 * _diagonal(v) * rng.normal(size=3)
+    pieces = [(v + shifts[k], f[sector == k]) for k in range(4)]
+    repaired = repair_mesh(clean_mesh(*_stack(*pieces)))
+    assert _one_closed_manifold(repaired) and not _has(repaired, "fragments")
+
+
 def test_zipped_sphere_signature_is_close_to_the_intact_one():
     v, f = SPHERE
     mesh = clean_mesh(*_gapped(v, f))

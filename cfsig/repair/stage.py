@@ -45,6 +45,8 @@ from cfsig.repair.proxy import proxy_mesh
 # Boundary vertices of different parts closer than this fraction of the bounding-box diagonal
 # are stitched together.
 STITCH_DISTANCE = 0.02
+# Rounds of stitching at most (`stitch` pairs each vertex once a round).
+STITCH_ROUNDS = 3
 # A part's faces within this fraction of the diagonal of a larger part's surface cover it twice.
 OVERLAP_DISTANCE = 0.002
 # Open parts with less than this fraction of the total area are fragments, dropped, as long
@@ -135,10 +137,17 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
         # The seam's corners were split apart as non-manifold while it was open: weld them.
         vertices, faces, edges = _tidy(*weld_copies(vertices, faces))
     # Each step gets the faces cleaned after the one before, with the edges of that cleaning.
-    vertices, faces, stitched = stitch(vertices, faces, edges, STITCH_DISTANCE * diagonal)
+    # A vertex is paired once a round: where three parts meet, the third waits for the next.
+    stitched = 0
+    for _ in range(STITCH_ROUNDS):
+        vertices, faces, pairs = stitch(vertices, faces, edges, STITCH_DISTANCE * diagonal)
+        vertices, faces, edges = _tidy(vertices, faces)
+        stitched += pairs
+        if not pairs:
+            break
     if stitched:
         done.append(f"stitched {stitched} pairs of boundary vertices between parts")
-    kept = drop_fragments(*_tidy(vertices, faces), FRAGMENT_AREA)
+    kept = drop_fragments(vertices, faces, edges, FRAGMENT_AREA)
     if kept is None:
         return None
     vertices, faces, dropped = kept
