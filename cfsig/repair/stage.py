@@ -67,7 +67,8 @@ def repair_mesh(mesh: Mesh, mode: str = "auto", limits: Limits | None = None) ->
         A checked mesh, as `cfsig.files.mesh.clean_mesh` returns.
     mode : {"auto", "off", "proxy"}
         ``"auto"``: the first route that applies (module docstring); ``"off"``: the mesh as
-        read, solved per component; ``"proxy"``: the proxy for anything but a clean mesh.
+        read, solved per component; ``"proxy"``: the proxy for anything but a clean mesh or
+        one closed manifold with faces reversed, which are turned.
     limits : Limits, optional
         Time and memory allowed to the proxy (default `Limits()`).
 
