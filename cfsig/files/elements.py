@@ -66,6 +66,25 @@ def mesh_edges(faces: np.ndarray, n_vertices: int) -> Edges:
     return Edges(np.stack([low[first], high[first]], axis=1), order, starts)
 
 
+def paired_half_edges(edges: Edges) -> tuple[np.ndarray, np.ndarray]:
+    """The two half-edges of every edge that has exactly two faces.
+
+    Parameters
+    ----------
+    edges : Edges
+        A mesh's edges (`mesh_edges`).
+
+    Returns
+    -------
+    a, b : (k,) int64
+        Half-edges ``3f + j`` on the same edge, k the number of edges of two faces. The faces
+        are consistently oriented across that edge when ``faces.ravel()[a] != faces.ravel()[b]``
+        (they leave it from different ends).
+    """
+    pair = edges.starts[:-1][np.diff(edges.starts) == 2]
+    return edges.order[pair], edges.order[pair + 1]
+
+
 def edge_graph(faces: np.ndarray, n_vertices: int) -> sp.csr_matrix:
     """The mesh's edges as a symmetric sparse matrix of face counts.
 

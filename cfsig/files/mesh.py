@@ -15,7 +15,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from cfsig.errors import MeshError, MissingDependencyError
-from cfsig.files.elements import Edges, mesh_edges
+from cfsig.files.elements import Edges, mesh_edges, paired_half_edges
 from cfsig.files.folders import MESH_SUFFIXES
 
 # The Laplacian and the curvature take products of up to four lengths, which end float64 near
@@ -286,10 +286,8 @@ def _fans(faces: np.ndarray, edges: Edges) -> np.ndarray:
     """The smallest corner of the fan of every corner ``3f + j``."""
     vertex = faces.ravel()
     step = np.tile(np.array([1, 1, -2]), len(faces))  # from a corner to the next in its face
-    counts = np.diff(edges.starts)
-    closed = bool(np.all(counts == 2))
-    pair = edges.starts[:-1] if closed else edges.starts[:-1][counts == 2]
-    a, b = edges.order[pair], edges.order[pair + 1]  # edges of two faces join fans; others break
+    closed = bool(np.all(np.diff(edges.starts) == 2))
+    a, b = paired_half_edges(edges)  # edges of two faces join fans; others break
     if np.any(vertex[a] == vertex[b]):  # two faces run along an edge the same way
         return _fans_by_components(vertex, step, a, b)
     return _fans_by_jumping(vertex, step, a, b, closed)

@@ -28,7 +28,14 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from cfsig.errors import StageLimitError
-from cfsig.files.elements import Edges, edge_lengths, face_areas, mesh_edges
+from cfsig.files.elements import (
+    Edges,
+    edge_lengths,
+    face_areas,
+    mesh_edges,
+    paired_half_edges,
+    signed_volumes,
+)
 from cfsig.files.mesh import Mesh, clean_mesh
 from cfsig.isolate import Limits
 from cfsig.params import REPAIR_MODES
@@ -36,7 +43,6 @@ from cfsig.repair.local import (
     closed_parts,
     drop_dangling,
     orient_parts,
-    signed_volumes,
     split_t_junctions,
     weld_copies,
 )
@@ -87,9 +93,9 @@ def repair_mesh(mesh: Mesh, mode: str = "auto", limits: Limits | None = None) ->
     """
     if mode not in REPAIR_MODES:
         raise ValueError(f"unknown repair mode {mode!r}; choose from {', '.join(REPAIR_MODES)}")
-    n_parts, labels, closed = _surface(mesh)
+    edges, n_parts, labels, closed = _surface(mesh)
     if n_parts == 1 and closed:
-        if _oriented_outward(mesh):
+        if _oriented_outward(mesh, edges):
             return replace(mesh, parts=labels)
         if mode != "off":  # a closed mesh with reversed faces: turning them is all it needs
             done = list(mesh.repairs)
@@ -142,10 +148,10 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
     stitched = 0
     for _ in range(STITCH_ROUNDS):
         vertices, faces, pairs = stitch(vertices, faces, edges, STITCH_DISTANCE * diagonal)
-        vertices, faces, edges = _tidy(vertices, faces)
-        stitched += pairs
         if not pairs:
             break
+        vertices, faces, edges = _tidy(vertices, faces)
+        stitched += pairs
     if stitched:
         done.append(f"stitched {stitched} pairs of boundary vertices between parts")
     kept = drop_fragments(vertices, faces, edges, FRAGMENT_AREA)
@@ -172,7 +178,7 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
     if refused:
         done.append(f"left {refused} crossing parts apart: manifold3d refused their union")
     result = clean_mesh(vertices, faces, weld=False)
-    n_parts, labels, closed = _surface(result)
+    _, n_parts, labels, closed = _surface(result)
     if not closed:
         return None
     if n_parts > 1:
@@ -571,10 +577,11 @@ def _part_areas(
     return np.bincount(face_part, face_areas(edge_lengths(vertices, faces)), n_parts)
 
 
-def _surface(mesh: Mesh) -> tuple[int, np.ndarray, bool]:
-    """A mesh's number of parts, the part of each vertex, and whether every edge has two faces."""
+def _surface(mesh: Mesh) -> tuple[Edges, int, np.ndarray, bool]:
+    """A mesh's edges, number of parts, the part of each vertex, and whether every edge has two
+    faces."""
     edges, n_parts, labels = _face_graph(mesh.faces, len(mesh.vertices), mesh.edges)
-    return n_parts, labels, bool(np.all(np.diff(edges.starts) == 2))
+    return edges, n_parts, labels, bool(np.all(np.diff(edges.starts) == 2))
 
 
 def _oriented(vertices: np.ndarray, faces: np.ndarray, done: list[str]) -> np.ndarray:
@@ -586,12 +593,12 @@ def _oriented(vertices: np.ndarray, faces: np.ndarray, done: list[str]) -> np.nd
     return oriented
 
 
-def _oriented_outward(mesh: Mesh) -> bool:
+def _oriented_outward(mesh: Mesh, edges: Edges) -> bool:
     """Whether the two faces of each edge of a closed mesh run along it in opposite directions,
     and the faces enclose a positive volume."""
-    edges = mesh.edges if mesh.edges is not None else mesh_edges(mesh.faces, len(mesh.vertices))
-    start = mesh.faces.ravel()[edges.order]  # the vertex each face leaves the edge from
-    if np.any(start[0::2] == start[1::2]):
+    a, b = paired_half_edges(edges)
+    vertex = mesh.faces.ravel()
+    if np.any(vertex[a] == vertex[b]):
         return False
     return bool(signed_volumes(mesh.vertices, mesh.faces).sum() > 0)
 
