@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from functools import partial
 from itertools import islice
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 from cfsig.errors import CfsigError, ClusterError, MissingDependencyError
 from cfsig.files.folders import find_meshes, mesh_label
@@ -28,25 +28,28 @@ _CONNECT_TIMEOUT = "20s"
 _COMMIT_SECONDS = 30.0
 _TASK_SECONDS = 0.5  # work per Dask task that batches aim at: docs/performance.md
 _MAX_BATCH = 1000  # files per Dask task at most
-Compute = Callable[[Path, Params, str], "Signature"]
+Compute = Callable[[Path, Params, str], Any]  # returns a Signature, or another measure of a file
+Result = TypeVar("Result")
 
 
 @dataclass(frozen=True)
-class Outcome:
-    """The result for one file: a signature, or the reason there is none.
+class Outcome(Generic[Result]):
+    """The result for one file: its signature (or what else was computed), or why there is none.
 
     Attributes
     ----------
     path : Path
         The mesh file.
     signature : Signature or None
-        None when the file failed.
+        What the computation returned: a `cfsig.descriptors.signature.Signature` unless the
+        caller computed something else (`cfsig.evaluation.collections.evaluate_partial`
+        measures parts); None when the file failed.
     error : str
         One line naming the file and the reason; empty on success.
     """
 
     path: Path
-    signature: Signature | None
+    signature: Result | None
     error: str = ""
 
 
@@ -90,8 +93,9 @@ def compute_many(
         Address of a running Dask scheduler (``tcp://host:port``): compute on its workers
         instead of local processes. Needs the ``dask`` extra, and cfsig installed on the workers.
     compute : callable, optional
-        ``compute(path, params, solver) -> Signature``, a module-level function (it is pickled
-        by name); `cfsig.descriptors.signature.signature_file` unless a caller wraps it.
+        ``compute(path, params, solver)``, a module-level function (it is pickled by name)
+        whose return value each outcome carries; default:
+        `cfsig.descriptors.signature.signature_file`.
     limits : Limits, optional
         Wall time and memory allowed to each file's proxy remesh, when ``compute`` is the
         default (`cfsig.descriptors.signature.signature_file`).

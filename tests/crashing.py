@@ -1,5 +1,5 @@
-"""A worker function for the batch tests: it kills its own process on files named crash*.off
-and raises an error that is not cfsig's on files named oops*.off.
+"""Worker functions for the batch tests: they kill their own process on files named crash*.off,
+and the first raises an error that is not cfsig's on files named oops*.off.
 
 It lives in a module of its own so that spawned worker processes can import it by name.
 """
@@ -7,6 +7,7 @@ It lives in a module of its own so that spawned worker processes can import it b
 import os
 
 from cfsig.descriptors.signature import signature_file
+from cfsig.search.partial import partial_file
 
 
 def signature_or_crash(path, params, solver):
@@ -16,3 +17,10 @@ def signature_or_crash(path, params, solver):
     if os.path.basename(path).startswith("oops"):
         raise RuntimeError("not a cfsig error")
     return signature_file(path, params, solver)
+
+
+def part_or_crash(path, params, solver):
+    """`partial_file`, except that it kills its process on files named crash*.off."""
+    if os.path.basename(path).startswith("crash"):
+        os._exit(3)
+    return partial_file(path, params)

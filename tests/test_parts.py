@@ -11,6 +11,8 @@ from cfsig.descriptors import intrinsic as cfhks
 from cfsig.descriptors import layout
 from cfsig.descriptors.signature import compute_signature
 from cfsig.errors import PartialError
+from cfsig.evaluation import collections
+from cfsig.evaluation.collections import evaluate_partial
 from cfsig.evaluation.measures import evaluate_queries
 from cfsig.files.mesh import clean_mesh
 from cfsig.index.store import IndexReader
@@ -27,6 +29,7 @@ from cfsig.search.partial import (
     share_curvatures,
     share_queries,
 )
+from tests.crashing import part_or_crash
 from tests.helpers import icosphere, open_cylinder, torus, write_off
 
 DEFAULT = Params()
@@ -178,6 +181,19 @@ def test_evaluate_partial(wholes):
     assert result.exit_code == 0, result.output
     report = json.loads(result.output)
     assert report["count"] == 2 and report["measures"]["NN"] == 1.0
+
+
+def test_a_part_that_crashes_its_worker_fails_alone(wholes, tmp_path, monkeypatch):
+    root, index = wholes
+    parts = tmp_path / "parts"
+    for name in ("torus", "bumpy"):
+        (parts / name).mkdir(parents=True)
+        (parts / name / "cut.off").write_bytes((root / "parts" / name / "cut.off").read_bytes())
+    (parts / "torus" / "crash.off").write_bytes((parts / "torus" / "cut.off").read_bytes())
+    monkeypatch.setattr(collections, "_part_file", part_or_crash)
+    report, failures = evaluate_partial(index, parts, jobs=2)
+    assert report.count == 2 and report.measures["NN"] == 1.0
+    assert len(failures) == 1 and "crash.off" in failures[0] and "crashed" in failures[0]
 
 
 def test_partial_query_of_an_old_index_is_refused(tmp_path, wholes):

@@ -10,10 +10,8 @@ file
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -248,7 +246,8 @@ def evaluate_partial(
     folder : str or os.PathLike
         Walked recursively for mesh files.
     jobs : int, optional
-        Worker processes measuring the parts; default: the number of CPU cores.
+        Worker processes measuring the parts (`cfsig.batch.compute_many`: a part that crashes
+        its worker fails alone); default: the number of CPU cores.
 
     Returns
     -------
@@ -277,15 +276,11 @@ def evaluate_partial(
         raise MeshError(f"{folder}: no mesh files")
     rows, asked, failures = [], [], []
     paths = list(found)
-    if jobs == 1:
-        parts = [_measured_part(path, params) for path in paths]
-    else:
-        spawn = multiprocessing.get_context("spawn")  # no fork of a process holding h5py files
-        with ProcessPoolExecutor(jobs or os.cpu_count(), mp_context=spawn) as pool:
-            parts = list(pool.map(_measured_part, paths, [params] * len(paths), chunksize=4))
-    for path, part in zip(paths, parts, strict=True):
-        if isinstance(part, str):
-            failures.append(part)
+    parts = {o.path: o for o in compute_many(paths, params, jobs=jobs, compute=_part_file)}
+    for path in paths:
+        part = parts[path].signature
+        if part is None:
+            failures.append(parts[path].error)
         else:
             rows.append(expanded_distances(part, signatures, params, cells))
             asked.append(mesh_label(path))
@@ -294,12 +289,9 @@ def evaluate_partial(
     return evaluate_queries(np.array(rows), asked, [str(label) for label in labels]), failures
 
 
-def _measured_part(path: Path, params: Params) -> Part | str:
-    """A part measured in a worker (`partial_file`), or the line saying why it could not be."""
-    try:
-        return partial_file(path, params)
-    except MeshError as exc:
-        return str(exc)
+def _part_file(path: Path, params: Params, solver: str) -> Part:
+    """`partial_file` as `compute_many` calls it: parts are solved by the default solver."""
+    return partial_file(path, params)
 
 
 def evaluate_collections(
