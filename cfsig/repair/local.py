@@ -173,11 +173,13 @@ def split_t_junctions(
     start, direction = vertices[a], vertices[b] - vertices[a]
     length = np.linalg.norm(direction, axis=1)
     points = np.unique(np.r_[a, b])
-    tree = cKDTree((start + vertices[b]) / 2)
-    near = tree.query_ball_point(vertices[points], float(length.max()) / 2 + tolerance)
+    tree = cKDTree(vertices[points])
+    # Each edge's own ball, not one as wide as the longest edge: a model with one long boundary
+    # edge (a ground plane) would otherwise pair every vertex with every edge.
+    near = tree.query_ball_point((start + vertices[b]) / 2, length / 2 + tolerance)
     sizes = np.fromiter(map(len, near), dtype=np.int64, count=len(near))
-    point = np.repeat(points, sizes)
-    edge = np.fromiter((e for row in near for e in row), dtype=np.int64, count=int(sizes.sum()))
+    edge = np.repeat(np.arange(len(half)), sizes)
+    point = points[np.fromiter((i for row in near for i in row), np.int64, int(sizes.sum()))]
     along = np.einsum("ij,ij->i", vertices[point] - start[edge], direction[edge])
     t = along / np.maximum(length[edge] ** 2, np.finfo(float).tiny)
     gap = np.linalg.norm(start[edge] + t[:, None] * direction[edge] - vertices[point], axis=1)
@@ -190,7 +192,7 @@ def split_t_junctions(
     # boundaries merely cross, they lie off it.
     seam = np.zeros(len(vertices), dtype=bool)
     seam[point] = True
-    seam[points[cKDTree(vertices[points]).query_pairs(tolerance, output_type="ndarray")]] = True
+    seam[points[tree.query_pairs(tolerance, output_type="ndarray")]] = True
     following, preceding = np.full(len(vertices), -1), np.full(len(vertices), -1)
     following[a], preceding[b] = b, a
     along = np.ones(len(point), dtype=bool)
