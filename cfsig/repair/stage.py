@@ -58,8 +58,9 @@ OVERLAP_DISTANCE = 0.002
 # Open parts with less than this fraction of the total area are fragments, dropped, as long
 # as they hold no more than this fraction together.
 FRAGMENT_AREA = 0.01
-# Local repairs are tried on at most this many parts; beyond, the proxy is built directly.
-MAX_PARTS = 256
+# Local repairs are tried on at most this many parts; beyond, the proxy is built directly
+# (docs/method.md: the cost of local repairs beyond it).
+MAX_PARTS = 1024
 # A boundary vertex this close to a boundary edge (fraction of the diagonal) splits it.
 T_JUNCTION = 1e-4
 
