@@ -286,8 +286,8 @@ def _fans(faces: np.ndarray, edges: Edges) -> np.ndarray:
     """The smallest corner of the fan of every corner ``3f + j``."""
     vertex = faces.ravel()
     step = np.tile(np.array([1, 1, -2]), len(faces))  # from a corner to the next in its face
-    closed = bool(np.all(np.diff(edges.starts) == 2))
     a, b = paired_half_edges(edges)  # edges of two faces join fans; others break
+    closed = len(a) == len(edges.ends)  # every edge has two faces
     if np.any(vertex[a] == vertex[b]):  # two faces run along an edge the same way
         return _fans_by_components(vertex, step, a, b)
     return _fans_by_jumping(vertex, step, a, b, closed)
