@@ -25,6 +25,8 @@ identical):
   parts), each with its own vertices, moved 0.5% of the diagonal away from its cuts.
 - ``inner-1``, ``-5``: closed spheres or boxes (radius 2-5% of the diagonal) hidden anywhere
   inside the shape.
+- ``walls-1``, ``-5``: flat open disks (radius 5-15% of the diagonal) through points inside
+  the shape, turned at random, cut to their faces inside it: hidden inner walls.
 - ``outside-1``, ``-5``: small closed spheres or boxes (radius 1-2%) beside the surface, apart
   from it (buttons, eyes): parts of the object, which the repair keeps.
 - ``intersecting-1``, ``-5``: small closed spheres or boxes (radius 1-2%) centred on the
@@ -365,6 +367,35 @@ def inner(mesh: Mesh, rng: np.random.Generator, count: int) -> Mesh:
     return concatenate([mesh, *parts])
 
 
+def _disk(center: np.ndarray, radius: float, rng: np.random.Generator) -> Mesh:
+    """A flat open disk of 8 rings of 32 points around a centre point, turned at random."""
+    rings, around = 8, 32
+    r = np.repeat(np.arange(1, rings + 1) / rings, around)
+    t = np.tile(2 * np.pi * np.arange(around) / around, rings)
+    flat = np.vstack([np.zeros(3), np.column_stack([r * np.cos(t), r * np.sin(t), 0 * r])])
+    k = np.arange(around)
+    k1 = (k + 1) % around
+    faces = [np.column_stack([0 * k, 1 + k, 1 + k1])]
+    for ring in range(rings - 1):
+        a, b = 1 + ring * around, 1 + (ring + 1) * around
+        faces += [np.column_stack([a + k, b + k, b + k1]), np.column_stack([a + k, b + k1, a + k1])]
+    return center + radius * flat @ rotation(rng).T, np.vstack(faces)
+
+
+def walls(mesh: Mesh, rng: np.random.Generator, count: int) -> Mesh:
+    """``count`` flat open disks (radius 5-15% of the diagonal) through points inside the shape,
+    cut to their faces whose centroids are inside it: hidden inner walls."""
+    vertices, faces = mesh
+    diag = diagonal(vertices)
+    centers, _ = inner_centers(mesh, [0.005 * diag] * count, rng)
+    parts = []
+    for center in centers:
+        disk = _disk(center, rng.uniform(0.05, 0.15) * diag, rng)
+        inside = np.abs(igl.fast_winding_number(vertices, faces, centroids(disk))) > 0.5
+        parts.append(submesh(disk, inside))
+    return concatenate([mesh, *parts])
+
+
 def _surface_points(mesh: Mesh, rng: np.random.Generator, count: int) -> tuple:
     """Centroids of ``count`` random faces and their unit normals, faces drawn by area."""
     vertices, faces = mesh
@@ -488,6 +519,7 @@ MESS_KINDS: dict[str, Kind] = {
     **{f"holes-{n}": partial(holes, count=n) for n in (1, 10, 50)},
     **{f"gaps-{n}": partial(gaps, count=n) for n in (2, 10, 30)},
     **{f"inner-{n}": partial(inner, count=n) for n in (1, 5)},
+    **{f"walls-{n}": partial(walls, count=n) for n in (1, 5)},
     **{f"outside-{n}": partial(outside, count=n) for n in (1, 5)},
     **{f"intersecting-{n}": partial(intersecting, count=n) for n in (1, 5)},
     **{f"mixture-{p:g}%": partial(mixture, share=p / 100) for p in (2, 5)},

@@ -7,9 +7,9 @@ from cfsig.descriptors.signature import compute_signature
 from cfsig.files.elements import mesh_edges
 from cfsig.files.mesh import clean_mesh
 from cfsig.params import Params
-from cfsig.repair.local import drop_dangling, orient_parts, split_t_junctions
+from cfsig.repair.local import drop_dangling, drop_hidden, orient_parts, split_t_junctions
 from cfsig.repair.stage import repair_mesh
-from tests.helpers import icosphere
+from tests.helpers import disk, icosphere, random_rotation
 from tests.helpers import l1 as _l1
 
 SPHERE = icosphere(3)
@@ -230,6 +230,30 @@ def test_inner_parts_anywhere_inside_are_dropped():
         "dropped 3 parts enclosed" in r for r in repaired.repairs
     )
     assert np.array_equal(repaired.vertices, v) and np.array_equal(repaired.faces, f)
+
+
+def _walls(radius, count):
+    """``count`` flat disks of ``radius`` through the origin, each turned its own way."""
+    v, f = disk(24, 6)
+    return [((radius / 6) * v @ random_rotation(seed).T, f) for seed in range(count)]
+
+
+def test_inner_walls_crossing_each_other_inside_a_body_are_dropped():
+    v, f = SPHERE
+    mesh = clean_mesh(*_stack((v, f), *_walls(0.6, 3)))
+    repaired = repair_mesh(mesh)
+    assert repaired.route == "repaired"
+    assert any("dropped 3 open parts inside closed ones" in r for r in repaired.repairs)
+    assert _position_faces(repaired) == _position_faces(clean_mesh(v, f))
+
+
+def test_an_open_part_through_the_surface_is_not_hidden():
+    v, f = SPHERE
+    mesh = clean_mesh(*_stack((v, f), *_walls(1.5, 1)))
+    edges = mesh_edges(mesh.faces, len(mesh.vertices))
+    labels = igl.vertex_components(mesh.faces)
+    faces, dropped = drop_hidden(mesh.vertices, mesh.faces, labels, edges)
+    assert dropped == 0 and np.array_equal(faces, mesh.faces)
 
 
 def _projective_plane(points):

@@ -85,6 +85,28 @@ def paired_half_edges(edges: Edges) -> tuple[np.ndarray, np.ndarray]:
     return edges.order[pair], edges.order[pair + 1]
 
 
+def open_parts(edges: Edges, labels: np.ndarray, n_parts: int) -> np.ndarray:
+    """Which parts have a boundary edge (an edge of one face).
+
+    Parameters
+    ----------
+    edges : Edges
+        A mesh's edges (`mesh_edges`).
+    labels : (n,) int
+        Part of each vertex.
+    n_parts : int
+        Number of parts.
+
+    Returns
+    -------
+    open : (n_parts,) bool
+        True for the parts with a boundary edge.
+    """
+    found = np.zeros(n_parts, dtype=bool)
+    found[labels[edges.ends[np.diff(edges.starts) == 1, 0]]] = True
+    return found
+
+
 def edge_graph(faces: np.ndarray, n_vertices: int) -> sp.csr_matrix:
     """The mesh's edges as a symmetric sparse matrix of face counts.
 

@@ -6,6 +6,7 @@ work on the whole mesh at once rather than part by part (`cfsig.repair.stage`).
 - `drop_dangling`: fins and dangling open sheets on edges of three or more faces go; of the
   closed sheets meeting on an edge an odd number of times, the smallest goes until the
   surface closes.
+- `drop_hidden`: open parts lying inside the closed ones (inner walls, hidden interiors) go.
 - `split_t_junctions`: the two sides of a seam meshed independently are stitched by splitting
   each boundary edge at the other side's vertices lying on it.
 - `orient_parts`: every part oriented consistently and outward.
@@ -19,7 +20,14 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from cfsig.files.elements import Edges, edge_lengths, face_areas, mesh_edges, signed_volumes
+from cfsig.files.elements import (
+    Edges,
+    edge_lengths,
+    face_areas,
+    mesh_edges,
+    open_parts,
+    signed_volumes,
+)
 from cfsig.isolate import Limits, run_limited
 
 # Rounds of `drop_dangling`: each drops what the one before uncovered.
@@ -125,6 +133,52 @@ def _sheets(edges: Edges, counts: np.ndarray, n_faces: int) -> tuple[int, np.nda
     graph = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(n_faces, n_faces))
     count, labels = connected_components(graph, directed=False)
     return int(count), labels
+
+
+def drop_hidden(
+    vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, edges: Edges
+) -> tuple[np.ndarray, int]:
+    """Drop the open parts that lie inside the closed ones: inner walls, hidden interiors.
+
+    An open part is hidden when at least `ENCLOSED_SHARE` of its faces have their centroid
+    inside the closed parts, by the generalized winding number of all of them together (libigl's
+    fast winding number). Dropped before stitching, such a part cannot be zipped to another.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        Vertex positions.
+    faces : (m, 3) int64
+        Triangles with at most two faces per edge.
+    labels : (n,) int
+        Part of each vertex.
+    edges : Edges
+        The faces' edges (`cfsig.files.elements.mesh_edges`).
+
+    Returns
+    -------
+    faces : (m', 3) int64
+        The faces kept.
+    dropped : int
+        Number of open parts dropped.
+    """
+    n_parts = int(labels.max()) + 1
+    face_part = labels[faces[:, 0]]
+    open_face = open_parts(edges, labels, n_parts)[face_part]
+    if open_face.all() or not open_face.any():
+        return faces, 0
+    import igl
+
+    centroids = vertices[faces[open_face]].mean(axis=1)
+    winding = igl.fast_winding_number(vertices, faces[~open_face], centroids)
+    part = face_part[open_face]
+    share = np.bincount(part, np.abs(winding) > 0.5, n_parts) / np.maximum(
+        np.bincount(part, minlength=n_parts), 1
+    )
+    hidden = share >= ENCLOSED_SHARE
+    if not hidden.any():
+        return faces, 0
+    return faces[~hidden[face_part]], int(hidden.sum())
 
 
 def split_t_junctions(

@@ -23,6 +23,7 @@ from cfsig.files.elements import (
     edge_lengths,
     face_areas,
     mesh_edges,
+    open_parts,
     signed_volumes,
 )
 from cfsig.files.mesh import Mesh, clean_mesh
@@ -158,8 +159,7 @@ def signed_distance(
     n_parts, labels = components(edge_graph(faces, len(vertices)))
     part = labels[faces[:, 0]]
     edges = mesh_edges(faces, len(vertices))
-    open_part = np.zeros(n_parts, dtype=bool)
-    open_part[labels[edges.ends[np.diff(edges.starts) == 1, 0]]] = True
+    open_part = open_parts(edges, labels, n_parts)
     mine = part[np.maximum(nearest, 0)]
     exact = ~far & ~open_part[mine]
     if n_parts > 1:

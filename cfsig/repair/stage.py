@@ -9,11 +9,11 @@ numerics, and chooses one of three routes (docs/method.md, "The repair stage"):
 - ``clean``: the mesh is one closed manifold, oriented outward; it passes unchanged, bit for
   bit. One closed manifold with faces reversed only has them turned (route ``repaired``).
 - ``repaired``: local repairs make it closed manifold parts, for any amount of damage: fins,
-  dangling sheets and inner walls on non-manifold edges are dropped, T-junctions split, parts
-  whose boundaries nearly meet stitched, small open fragments dropped, holes closed by ears,
-  parts oriented, parts enclosed by another dropped and parts crossing another joined by their
-  union (`cfsig.repair.local`); closed parts apart are kept. The rest of the surface is kept
-  exactly.
+  dangling sheets and inner walls on non-manifold edges are dropped, and so are open parts
+  inside closed ones; T-junctions split, parts whose boundaries nearly meet stitched, small
+  open fragments dropped, holes closed by ears, parts oriented, parts enclosed by another
+  dropped and parts crossing another joined by their union (`cfsig.repair.local`); closed
+  parts apart are kept. The rest of the surface is kept exactly.
 - ``proxy``: otherwise, the surface is rebuilt on a grid whose cells follow the thinnest
   parts (`cfsig.repair.proxy`), in a child process under a time and memory limit.
 """
@@ -33,6 +33,7 @@ from cfsig.files.elements import (
     edge_lengths,
     face_areas,
     mesh_edges,
+    open_parts,
     paired_half_edges,
     signed_volumes,
 )
@@ -42,6 +43,7 @@ from cfsig.params import REPAIR_MODES
 from cfsig.repair.local import (
     closed_parts,
     drop_dangling,
+    drop_hidden,
     orient_parts,
     split_t_junctions,
     weld_copies,
@@ -129,9 +131,14 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
     if walls:
         done.append(f"dropped {walls} inner walls between closed sheets")
     vertices, faces, edges = _tidy(vertices, faces)
-    _, n_parts, labels = _face_graph(faces, len(vertices), edges)
+    edges, n_parts, labels = _face_graph(faces, len(vertices), edges)
     if n_parts > MAX_PARTS:
         return None
+    faces, hidden = drop_hidden(vertices, faces, labels, edges)
+    if hidden:
+        done.append(f"dropped {hidden} open parts inside closed ones")
+        vertices, faces, edges = _tidy(vertices, faces)
+        labels = _face_graph(faces, len(vertices), edges)[2]
     diagonal = float(np.linalg.norm(np.ptp(vertices, axis=0)))
     faces, trimmed = trim_overlaps(vertices, faces, labels, OVERLAP_DISTANCE * diagonal)
     if trimmed:
@@ -229,8 +236,7 @@ def trim_overlaps(
         return faces, 0
     area = _part_areas(vertices, faces, face_part, n_parts)
     edges = mesh_edges(faces, len(vertices))
-    closed = np.ones(n_parts, dtype=bool)
-    closed[labels[edges.ends[np.diff(edges.starts) == 1, 0]]] = False
+    closed = ~open_parts(edges, labels, n_parts)
     keep = np.zeros(len(faces), dtype=bool)
     order = np.argsort(-area, kind="stable")
     keep[face_part == order[0]] = True
@@ -423,8 +429,7 @@ def drop_fragments(
     edges, n_parts, labels = _face_graph(faces, len(vertices), edges)
     face_part = labels[faces[:, 0]]
     area = _part_areas(vertices, faces, face_part, n_parts)
-    open_part = np.zeros(n_parts, dtype=bool)
-    open_part[labels[edges.ends[np.diff(edges.starts) == 1, 0]]] = True
+    open_part = open_parts(edges, labels, n_parts)
     drop = open_part & (area < fraction * area.sum())
     if not drop.any() or drop.all():
         return vertices, faces, 0
