@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import importlib.util
 import io
+import logging
 import os
 import warnings
 from dataclasses import dataclass
@@ -85,6 +86,9 @@ def read_mesh(path: str | os.PathLike) -> Mesh:
     MeshError
         The file is missing, unreadable, of an unknown type, malformed, or holds no usable
         triangle; the message names the file and the reason.
+    MissingDependencyError
+        The format needs an optional package that is not installed (3MF: networkx;
+        Draco-compressed glTF: DracoPy); the message names the file and the package.
     """
     return parse_mesh(read_bytes(path), path)
 
@@ -134,14 +138,16 @@ def parse_mesh(data: bytes, path: str | os.PathLike) -> Mesh:
     ------
     MeshError
         Malformed contents or no usable triangle; the message names the file and the reason.
+    MissingDependencyError
+        The format needs an optional package that is not installed (`read_mesh`).
     """
     suffix = Path(path).suffix.lower()
     if not data.strip():
         raise MeshError(f"{path}: empty file")
     try:
         vertices, faces = _parse_off(data) if suffix == ".off" else _parse_trimesh(data, path)
-    except MeshError as exc:
-        raise MeshError(f"{path}: {exc}") from None
+    except (MeshError, MissingDependencyError) as exc:
+        raise type(exc)(f"{path}: {exc}") from None
     try:
         return clean_mesh(vertices, faces)
     except MeshError as exc:
@@ -520,7 +526,16 @@ def _parse_trimesh(data: bytes, path: str | os.PathLike) -> tuple[np.ndarray, np
         raise MissingDependencyError("reading this format needs trimesh") from None
     if suffix == ".3mf" and importlib.util.find_spec("networkx") is None:
         raise MissingDependencyError("reading 3MF needs networkx: pip install networkx")
+    draco = suffix in (".glb", ".gltf") and b"KHR_draco_mesh_compression" in data
+    if draco and importlib.util.find_spec("DracoPy") is None:
+        raise MissingDependencyError(
+            "reading Draco-compressed glTF needs DracoPy: pip install 'cfsig[draco]'"
+        )
     resolver = trimesh.resolvers.FilePathResolver(str(path)) if suffix == ".gltf" else None
+    # trimesh logs what then fails as the MeshError below; with no handler of its own, Python
+    # would print the record on standard error.
+    silent = logging.NullHandler()
+    logging.getLogger("trimesh").addHandler(silent)
     try:
         loaded = trimesh.load(
             io.BytesIO(data), file_type=suffix[1:], process=False, force="mesh", resolver=resolver
@@ -532,3 +547,5 @@ def _parse_trimesh(data: bytes, path: str | os.PathLike) -> tuple[np.ndarray, np
         return vertices, faces
     except Exception as exc:  # trimesh raises many types on malformed files
         raise MeshError(f"malformed {suffix[1:].upper()}: {exc}") from None
+    finally:
+        logging.getLogger("trimesh").removeHandler(silent)
