@@ -150,8 +150,9 @@ def compute_collection(
     Parameters
     ----------
     folder : str or os.PathLike
-        Walked recursively for OFF, OBJ, PLY and STL files. A mesh's label is the name of the
-        folder holding it (``folder``'s own name for files directly in it).
+        Walked recursively for mesh files (`cfsig.files.folders.MESH_SUFFIXES`). A mesh's
+        label is the name of the folder holding it (``folder``'s own name for files directly
+        in it).
     params : Params
         Signature parameters, the descriptor included.
     solver : {"auto", "cholmod", "eigen", "scipy"}
