@@ -47,8 +47,10 @@ stage to undo but the ways a scan of a shape differs from its model:
 
 - ``remesh``: simplified to half its faces by quadric edge collapses
   (`cfsig.repair.simplify.decimate`), so that no vertex or triangle is the model's.
-- ``light-noise``, ``noise``: every vertex moved by Gaussian noise whose standard deviation per
-  coordinate is 3% or 10% of the mesh's mean edge length.
+- ``noise-3%``, ``-10%``, ``-50%``: every vertex moved by Gaussian noise whose standard
+  deviation per coordinate is that share of the mesh's mean edge length.
+- ``shot-0.1%``, ``-1%``: that share of the vertices each moved by 5% of the bounding box
+  diagonal in a random direction (spikes, a scanner's outliers).
 
 ``measure`` computes the clean signatures (the clean index) and the messy ones with
 `cfsig.batch.compute_many`; each messy copy queries the clean index by L1 and its original's
@@ -493,7 +495,7 @@ def remesh(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     return decimate(vertices, faces, len(faces) // 2)
 
 
-def _jitter(mesh: Mesh, rng: np.random.Generator, share: float) -> Mesh:
+def noise(mesh: Mesh, rng: np.random.Generator, share: float) -> Mesh:
     """Every vertex moved by Gaussian noise of ``share`` times the mean edge length."""
     vertices, faces = mesh
     edges = vertices[faces] - vertices[np.roll(faces, 1, axis=1)]
@@ -501,14 +503,13 @@ def _jitter(mesh: Mesh, rng: np.random.Generator, share: float) -> Mesh:
     return vertices + rng.normal(scale=sigma, size=vertices.shape), faces
 
 
-def light_noise(mesh: Mesh, rng: np.random.Generator) -> Mesh:
-    """Gaussian noise of 3% of the mean edge length on every vertex."""
-    return _jitter(mesh, rng, 0.03)
-
-
-def noise(mesh: Mesh, rng: np.random.Generator) -> Mesh:
-    """Gaussian noise of 10% of the mean edge length on every vertex."""
-    return _jitter(mesh, rng, 0.1)
+def shot(mesh: Mesh, rng: np.random.Generator, share: float) -> Mesh:
+    """``share`` of the vertices each moved by 5% of the diagonal in a random direction."""
+    vertices, faces = mesh
+    moved = vertices.copy()
+    picked = rng.choice(len(vertices), size=max(1, int(share * len(vertices))), replace=False)
+    moved[picked] += 0.05 * diagonal(vertices) * np.array([unit_vector(rng) for _ in picked])
+    return moved, faces
 
 
 Kind = Callable[[Mesh, np.random.Generator], Mesh]
@@ -530,8 +531,8 @@ MESS_KINDS: dict[str, Kind] = {
 # The proxy forced on clean meshes: measured with the repair mode "proxy".
 PROXY_KINDS: dict[str, Kind] = {"proxy": speck}
 SCAN_KINDS: dict[str, Kind] = {
-    "light-noise": light_noise,
-    "noise": noise,
+    **{f"noise-{p:g}%": partial(noise, share=p / 100) for p in (3, 10, 50)},
+    **{f"shot-{p:g}%": partial(shot, share=p / 100) for p in (0.1, 1)},
     "remesh": remesh,
 }
 KINDS = {**MESS_KINDS, **PROXY_KINDS, **SCAN_KINDS}
