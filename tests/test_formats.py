@@ -35,10 +35,14 @@ def _scene(vertices, faces, pieces=3, seed=0):
 
 
 @pytest.mark.parametrize("descriptor", ["intrinsic", "cf"])
-def test_a_glb_scene_is_the_mesh_it_was_cut_from(tmp_path, descriptor):
+@pytest.mark.parametrize("suffix", ["glb", "3mf"])
+def test_a_scene_is_the_mesh_it_was_cut_from(tmp_path, descriptor, suffix):
+    if suffix == "3mf":
+        for name in ("networkx", "lxml"):
+            pytest.importorskip(name, reason="3MF needs the 3mf extra")
     v, f = torus(wave=0.3, n_major=60, n_minor=20)  # below the copy's faces: no simplification
-    path = tmp_path / "ring.glb"
-    path.write_bytes(_scene(v, f).export(file_type="glb"))
+    path = tmp_path / f"ring.{suffix}"
+    path.write_bytes(_scene(v, f).export(file_type=suffix))
     read = read_mesh(path)
     assert len(read.faces) == len(f) and len(read.vertices) == len(v)  # the seams welded
     # In world coordinates: the nodes put back where they were cut, to float32's rounding.
@@ -115,6 +119,14 @@ def test_a_draco_compressed_glb_is_the_mesh_it_was_cut_from(tmp_path):
     # Draco stores positions quantized: each within a ten-thousandth of the size of the torus.
     gap = cKDTree(v).query(read.vertices)[0]
     assert gap.max() < 1e-4 * np.ptp(v, axis=0).max()
+
+
+def test_a_3mf_without_its_extra_says_how_to_install(tmp_path, monkeypatch):
+    path = tmp_path / "c.3mf"
+    path.write_bytes(b"PK not read: the check comes first")
+    monkeypatch.setitem(sys.modules, "lxml", None)
+    with pytest.raises(MissingDependencyError, match=rf"^{path}: .*pip install 'cfsig\[3mf\]'"):
+        read_mesh(path)
 
 
 def test_a_draco_glb_without_dracopy_says_how_to_install(tmp_path, monkeypatch):

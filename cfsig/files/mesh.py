@@ -87,8 +87,8 @@ def read_mesh(path: str | os.PathLike) -> Mesh:
         The file is missing, unreadable, of an unknown type, malformed, or holds no usable
         triangle; the message names the file and the reason.
     MissingDependencyError
-        The format needs an optional package that is not installed (3MF: networkx;
-        Draco-compressed glTF: DracoPy); the message names the file and the package.
+        The format needs an optional package that is not installed (3MF: networkx and lxml;
+        Draco-compressed glTF: DracoPy); the message names the file and the extra.
     """
     return parse_mesh(read_bytes(path), path)
 
@@ -524,8 +524,10 @@ def _parse_trimesh(data: bytes, path: str | os.PathLike) -> tuple[np.ndarray, np
         import trimesh.resolvers
     except ImportError:
         raise MissingDependencyError("reading this format needs trimesh") from None
-    if suffix == ".3mf" and importlib.util.find_spec("networkx") is None:
-        raise MissingDependencyError("reading 3MF needs networkx: pip install networkx")
+    if suffix == ".3mf" and any(importlib.util.find_spec(m) is None for m in ("networkx", "lxml")):
+        raise MissingDependencyError(
+            "reading 3MF needs networkx and lxml: pip install 'cfsig[3mf]'"
+        )
     draco = suffix in (".glb", ".gltf") and b"KHR_draco_mesh_compression" in data
     if draco and importlib.util.find_spec("DracoPy") is None:
         raise MissingDependencyError(
