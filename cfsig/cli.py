@@ -311,7 +311,7 @@ def index(
     partial_cells,
     commit_every,
 ) -> None:
-    """Index mesh files and folders (recursively: OFF, OBJ, PLY, STL, glTF, GLB, 3MF).
+    """Index mesh files and folders (recursively: OFF, OBJ, PLY, STL, glTF, GLB, 3MF, DAE).
 
     The index is a folder, created if needed.
 

@@ -34,15 +34,47 @@ def _scene(vertices, faces, pieces=3, seed=0):
     return scene
 
 
-@pytest.mark.parametrize("descriptor", ["intrinsic", "cf"])
-@pytest.mark.parametrize("suffix", ["glb", "3mf"])
-def test_a_scene_is_the_mesh_it_was_cut_from(tmp_path, descriptor, suffix):
+def _collada(scene: trimesh.Scene) -> bytes:
+    """A COLLADA file of a scene's nodes, each its geometry and transform (trimesh writes
+    COLLADA only for meshes, without nodes)."""
+    collada = pytest.importorskip("collada", reason="COLLADA needs the collada extra")
+    doc = collada.Collada()
+    nodes = []
+    for i, name in enumerate(scene.graph.nodes_geometry):
+        transform, geometry_name = scene.graph[name]
+        mesh = scene.geometry[geometry_name]
+        source = collada.source.FloatSource(f"v{i}", mesh.vertices.ravel(), ("X", "Y", "Z"))
+        geometry = collada.geometry.Geometry(doc, f"g{i}", f"g{i}", [source])
+        inputs = collada.source.InputList()
+        inputs.addInput(0, "VERTEX", f"#v{i}")
+        geometry.primitives.append(geometry.createTriangleSet(mesh.faces.ravel(), inputs, ""))
+        doc.geometries.append(geometry)
+        placed = collada.scene.MatrixTransform(np.asarray(transform, dtype=float).ravel())
+        children = [collada.scene.GeometryNode(geometry, [])]
+        nodes.append(collada.scene.Node(f"n{i}", children=children, transforms=[placed]))
+    doc.scenes.append(collada.scene.Scene("scene", nodes))
+    doc.scene = doc.scenes[0]
+    out = io.BytesIO()
+    doc.write(out)
+    return out.getvalue()
+
+
+def _scene_file(vertices, faces, suffix: str) -> bytes:
+    """`_scene` written as a GLB, 3MF or COLLADA file."""
+    if suffix == "dae":
+        return _collada(_scene(vertices, faces))
     if suffix == "3mf":
         for name in ("networkx", "lxml"):
             pytest.importorskip(name, reason="3MF needs the 3mf extra")
+    return _scene(vertices, faces).export(file_type=suffix)
+
+
+@pytest.mark.parametrize("descriptor", ["intrinsic", "cf"])
+@pytest.mark.parametrize("suffix", ["glb", "3mf", "dae"])
+def test_a_scene_is_the_mesh_it_was_cut_from(tmp_path, descriptor, suffix):
     v, f = torus(wave=0.3, n_major=60, n_minor=20)  # below the copy's faces: no simplification
     path = tmp_path / f"ring.{suffix}"
-    path.write_bytes(_scene(v, f).export(file_type=suffix))
+    path.write_bytes(_scene_file(v, f, suffix))
     read = read_mesh(path)
     assert len(read.faces) == len(f) and len(read.vertices) == len(v)  # the seams welded
     # In world coordinates: the nodes put back where they were cut, to float32's rounding.
@@ -121,11 +153,13 @@ def test_a_draco_compressed_glb_is_the_mesh_it_was_cut_from(tmp_path):
     assert gap.max() < 1e-4 * np.ptp(v, axis=0).max()
 
 
-def test_a_3mf_without_its_extra_says_how_to_install(tmp_path, monkeypatch):
-    path = tmp_path / "c.3mf"
-    path.write_bytes(b"PK not read: the check comes first")
-    monkeypatch.setitem(sys.modules, "lxml", None)
-    with pytest.raises(MissingDependencyError, match=rf"^{path}: .*pip install 'cfsig\[3mf\]'"):
+@pytest.mark.parametrize(("suffix", "module"), [("3mf", "lxml"), ("dae", "collada")])
+def test_a_format_without_its_extra_says_how_to_install(tmp_path, monkeypatch, suffix, module):
+    path = tmp_path / f"c.{suffix}"
+    path.write_bytes(b"not read: the check comes first")
+    monkeypatch.setitem(sys.modules, module, None)
+    extra = {"3mf": "3mf", "dae": "collada"}[suffix]
+    with pytest.raises(MissingDependencyError, match=rf"^{path}: .*pip install 'cfsig\[{extra}\]'"):
         read_mesh(path)
 
 

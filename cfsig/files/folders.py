@@ -11,7 +11,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 # Binary glTF (.glb) is how most models on the web ship; a glTF or 3MF file is a scene of parts.
-MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl", ".glb", ".gltf", ".3mf")
+MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl", ".glb", ".gltf", ".3mf", ".dae")
 
 
 def find_meshes(paths: Iterable[str | os.PathLike]) -> Iterator[tuple[Path, str]]:

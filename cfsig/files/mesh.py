@@ -1,5 +1,5 @@
-"""Reading and repairing triangle meshes: OFF, OBJ, PLY, STL, glTF and 3MF files to checked numpy
-arrays."""
+"""Reading and repairing triangle meshes: OFF, OBJ, PLY, STL, glTF, 3MF and COLLADA files to
+checked numpy arrays."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ MAX_COORDINATE = 1e50
 # Formats of scenes, whose parts are placed by their nodes' transforms, and how close (relative
 # to the bounding box's diagonal) two of their vertices are taken as one: float32's rounding of
 # a coordinate, about 6e-8 of it, times a few for the transform.
-SCENE_SUFFIXES = (".glb", ".gltf", ".3mf")
+SCENE_SUFFIXES = (".glb", ".gltf", ".3mf", ".dae")
 WELD_TOLERANCE = 1e-6
 MIN_SPAN = 1e-50
 
@@ -69,8 +69,8 @@ def read_mesh(path: str | os.PathLike) -> Mesh:
     """Read a mesh file and check and repair it with `clean_mesh`.
 
     OFF is parsed here, the others through trimesh. Polygons are split into triangle fans. A
-    scene (glTF, GLB, 3MF) is read as one mesh in world coordinates: every node's geometry
-    with its transform applied.
+    scene (glTF, GLB, 3MF, COLLADA) is read as one mesh in world coordinates: every node's
+    geometry with its transform applied.
 
     Parameters
     ----------
@@ -88,7 +88,8 @@ def read_mesh(path: str | os.PathLike) -> Mesh:
         triangle; the message names the file and the reason.
     MissingDependencyError
         The format needs an optional package that is not installed (3MF: networkx and lxml;
-        Draco-compressed glTF: DracoPy); the message names the file and the extra.
+        COLLADA: pycollada; Draco-compressed glTF: DracoPy); the message names the file and
+        the extra.
     """
     return parse_mesh(read_bytes(path), path)
 
@@ -524,15 +525,12 @@ def _parse_trimesh(data: bytes, path: str | os.PathLike) -> tuple[np.ndarray, np
         import trimesh.resolvers
     except ImportError:
         raise MissingDependencyError("reading this format needs trimesh") from None
-    if suffix == ".3mf" and any(importlib.util.find_spec(m) is None for m in ("networkx", "lxml")):
-        raise MissingDependencyError(
-            "reading 3MF needs networkx and lxml: pip install 'cfsig[3mf]'"
-        )
-    draco = suffix in (".glb", ".gltf") and b"KHR_draco_mesh_compression" in data
-    if draco and importlib.util.find_spec("DracoPy") is None:
-        raise MissingDependencyError(
-            "reading Draco-compressed glTF needs DracoPy: pip install 'cfsig[draco]'"
-        )
+    if suffix == ".3mf":
+        _require("3MF", ("networkx", "lxml"), "3mf")
+    elif suffix == ".dae":
+        _require("COLLADA", ("collada",), "collada")
+    elif suffix in (".glb", ".gltf") and b"KHR_draco_mesh_compression" in data:
+        _require("Draco-compressed glTF", ("DracoPy",), "draco")
     resolver = trimesh.resolvers.FilePathResolver(str(path)) if suffix == ".gltf" else None
     # trimesh logs what then fails as the MeshError below; with no handler of its own, Python
     # would print the record on standard error.
@@ -551,3 +549,11 @@ def _parse_trimesh(data: bytes, path: str | os.PathLike) -> tuple[np.ndarray, np
         raise MeshError(f"malformed {suffix[1:].upper()}: {exc}") from None
     finally:
         logging.getLogger("trimesh").removeHandler(silent)
+
+
+def _require(what: str, modules: tuple[str, ...], extra: str) -> None:
+    """Raise `MissingDependencyError`, naming the extra to install, unless every module is."""
+    if any(importlib.util.find_spec(module) is None for module in modules):
+        raise MissingDependencyError(
+            f"reading {what} needs the extra: pip install 'cfsig[{extra}]'"
+        )
