@@ -374,10 +374,12 @@ def _disk(center: np.ndarray, radius: float, rng: np.random.Generator) -> Mesh:
     rings, around = 8, 32
     r = np.repeat(np.arange(1, rings + 1) / rings, around)
     t = np.tile(2 * np.pi * np.arange(around) / around, rings)
-    flat = np.vstack([np.zeros(3), np.column_stack([r * np.cos(t), r * np.sin(t), 0 * r])])
+    flat = np.vstack(
+        [np.zeros(3), np.column_stack([r * np.cos(t), r * np.sin(t), np.zeros_like(r)])]
+    )
     k = np.arange(around)
     k1 = (k + 1) % around
-    faces = [np.column_stack([0 * k, 1 + k, 1 + k1])]
+    faces = [np.column_stack([np.zeros_like(k), 1 + k, 1 + k1])]
     for ring in range(rings - 1):
         a, b = 1 + ring * around, 1 + (ring + 1) * around
         faces += [np.column_stack([a + k, b + k, b + k1]), np.column_stack([a + k, b + k1, a + k1])]
