@@ -138,12 +138,12 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
     if hidden:
         done.append(f"dropped {hidden} open parts inside closed ones")
         vertices, faces, edges = _tidy(vertices, faces)
-        labels = _face_graph(faces, len(vertices), edges)[2]
+        edges, _, labels = _face_graph(faces, len(vertices), edges)
     diagonal = float(np.linalg.norm(np.ptp(vertices, axis=0)))
-    faces, trimmed = trim_overlaps(vertices, faces, labels, OVERLAP_DISTANCE * diagonal)
+    faces, trimmed = trim_overlaps(vertices, faces, labels, edges, OVERLAP_DISTANCE * diagonal)
     if trimmed:
         done.append(f"dropped {trimmed} faces lying on another part's surface")
-    vertices, faces, edges = _tidy(vertices, faces)
+        vertices, faces, edges = _tidy(vertices, faces)
     for _ in range(3):  # a face with T-junctions on two or three edges is split edge by edge
         faces, split = split_t_junctions(vertices, faces, edges, T_JUNCTION * diagonal)
         if not split:
@@ -202,7 +202,7 @@ def _tidy(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 
 def trim_overlaps(
-    vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, distance: float
+    vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, edges: Edges, distance: float
 ) -> tuple[np.ndarray, int]:
     """Drop the faces of a part that lie on the surface of a larger part (a surface covered twice).
 
@@ -218,6 +218,8 @@ def trim_overlaps(
         Triangles.
     labels : (n,) int
         Part of each vertex.
+    edges : geometry.Edges
+        The faces' edges (`cfsig.files.elements.mesh_edges`).
     distance : float
         Largest distance of a face's vertices to the other surface, in length units.
 
@@ -235,7 +237,6 @@ def trim_overlaps(
     if n_parts < 2:
         return faces, 0
     area = _part_areas(vertices, faces, face_part, n_parts)
-    edges = mesh_edges(faces, len(vertices))
     closed = ~open_parts(edges, labels, n_parts)
     keep = np.zeros(len(faces), dtype=bool)
     order = np.argsort(-area, kind="stable")
