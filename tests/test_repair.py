@@ -199,6 +199,23 @@ def test_a_shape_cut_into_hundreds_of_pieces_is_stitched_back():
     assert _area(repaired) == pytest.approx(_area(Mesh(v, f)), rel=0.01)
 
 
+def test_fingers_cut_across_are_stitched_each_to_itself():
+    """Four tubes side by side, each meshed on its own, 1% of the diagonal apart, cut across at
+    three heights and the pieces moved apart: each seam is stitched, and no tube is joined to
+    its neighbour, whose boundary passes closer than the stitching distance."""
+    tubes = [_tube(20 + k, 32 - 2 * k) for k in range(4)]
+    v, f = _stack(*[(t + [2.1 * k, 0.0, 0.0], tf) for k, (t, tf) in enumerate(tubes)])
+    level = np.searchsorted([-0.5, 0.0, 0.5], v[f].mean(axis=1)[:, 2])
+    shifts = 0.005 * _diagonal(v) * np.random.default_rng(0).normal(size=(4, 3))
+    mesh = clean_mesh(*_stack(*[(v + shifts[k], f[level == k]) for k in range(4)]))
+    repaired = repair_mesh(mesh)
+    assert repaired.route == "repaired" and _has(repaired, "stitched")
+    assert _components(repaired) == 4 and _is_closed(repaired)
+    n_edges = len(mesh_edges(repaired.faces, len(repaired.vertices)).ends)
+    assert len(repaired.vertices) - n_edges + len(repaired.faces) == 2 * 4  # four spheres
+    assert _area(repaired) == pytest.approx(_area(Mesh(v, f)), rel=0.01)
+
+
 def test_a_piece_whose_corners_are_taken_joins_in_a_later_round():
     """A triangle whose every corner is where two other pieces meet: their pairs take each
     corner first (the triangle's are a little off), so it is left apart in the first round of

@@ -53,6 +53,10 @@ from cfsig.repair.proxy import proxy_mesh
 # Boundary vertices of different parts closer than this fraction of the bounding-box diagonal
 # are stitched together.
 STITCH_DISTANCE = 0.02
+# A seam cut through a model: SEAM_PAIRS or more pairs of boundary vertices whose offsets agree
+# to within SEAM_AGREEMENT of the stitching distance (`_seeds`), 0.1% of the diagonal.
+SEAM_AGREEMENT = 0.05
+SEAM_PAIRS = 3
 # Rounds of stitching at most (`stitch` pairs each vertex once a round).
 STITCH_ROUNDS = 3
 # A part's faces within this fraction of the diagonal of a larger part's surface cover it twice.
@@ -153,13 +157,16 @@ def _local_repairs(mesh: Mesh, limits: Limits) -> Mesh | None:
         vertices, faces, edges = _tidy(*weld_copies(vertices, faces))
     # Each step gets the faces cleaned after the one before, with the edges of that cleaning.
     # A vertex is paired once a round: where three parts meet, the third waits for the next.
+    # The seams cut through a model come first, so that the parts they join are one before
+    # boundaries that merely pass near each other (fingers side by side) are compared.
     stitched = 0
-    for _ in range(STITCH_ROUNDS):
-        vertices, faces, pairs = stitch(vertices, faces, edges, STITCH_DISTANCE * diagonal)
-        if not pairs:
-            break
-        vertices, faces, edges = _tidy(vertices, faces)
-        stitched += pairs
+    for cut in (True, False):
+        for _ in range(STITCH_ROUNDS):
+            vertices, faces, pairs = stitch(vertices, faces, edges, STITCH_DISTANCE * diagonal, cut)
+            if not pairs:
+                break
+            vertices, faces, edges = _tidy(vertices, faces)
+            stitched += pairs
     if stitched:
         done.append(f"stitched {stitched} pairs of boundary vertices between parts")
     kept = drop_fragments(vertices, faces, edges, FRAGMENT_AREA)
@@ -264,7 +271,7 @@ def trim_overlaps(
 
 
 def stitch(
-    vertices: np.ndarray, faces: np.ndarray, edges: Edges | None, distance: float
+    vertices: np.ndarray, faces: np.ndarray, edges: Edges | None, distance: float, cut: bool
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Zip together the boundaries of different parts that run side by side.
 
@@ -284,6 +291,9 @@ def stitch(
         The faces' `cfsig.files.elements.mesh_edges` when already known (`clean_mesh` keeps them).
     distance : float
         Largest distance between two vertices to merge, in length units.
+    cut : bool
+        Stitch only the seams cut through a model (`_seeds`); False stitches every two parts
+        whose boundaries run side by side.
 
     Returns
     -------
@@ -305,10 +315,10 @@ def stitch(
     for loop in loops:
         following[loop], preceding[loop] = np.roll(loop, -1), np.roll(loop, 1)
     candidates = np.concatenate(loops)
-    seeds, shift, support = _seeds(vertices, labels, candidates, distance)
+    seeds, shift, support = _seeds(vertices, labels, candidates, distance, cut)
     if shift:
         vertices = _aligned(vertices, labels, shift, support)
-        seeds, shift, _ = _seeds(vertices, labels, candidates, distance)
+        seeds, shift, _ = _seeds(vertices, labels, candidates, distance, cut)
 
     def gap(x: int, y: int) -> float:
         """The distance of x and y once y's part is moved back onto x's."""
@@ -340,15 +350,20 @@ def stitch(
 
 
 def _seeds(
-    vertices: np.ndarray, labels: np.ndarray, candidates: np.ndarray, distance: float
+    vertices: np.ndarray, labels: np.ndarray, candidates: np.ndarray, distance: float, cut: bool
 ) -> tuple[list[tuple[int, int]], dict[tuple[int, int], np.ndarray], dict[tuple[int, int], int]]:
     """Candidate pairs for `stitch`, the shift between each two parts that meet, and the
     number of pairs it was measured on.
 
     Each boundary vertex is paired with its nearest few on other parts within ``distance``.
-    Parts of a model that were moved apart keep the vertices of their seam in step, so each
-    two parts get the median of their pairs' offsets as their shift, and the pairs are sorted
-    by their distance once that shift is undone.
+    With ``cut``, only seams cut through a model count: such a seam keeps its vertices in step
+    when its parts are moved apart, so the offsets of its pairs agree, where two boundaries that
+    merely pass near each other give offsets that vary. Two parts whose largest set of offsets
+    within `SEAM_AGREEMENT` of ``distance`` of one of them holds `SEAM_PAIRS` or more have a
+    cut seam: its mean offset is their shift and its pairs are the seeds. Without ``cut``, each
+    two parts get the median of their pairs' offsets as their shift (seams meshed on each side
+    on their own), and all their pairs are seeds. The seeds are sorted by their distance once
+    the shift is undone.
     """
     from scipy.spatial import cKDTree  # here: a tenth of a second to import, for a rare repair
 
@@ -361,18 +376,36 @@ def _seeds(
     a, b = candidates[rows[valid]], candidates[near[valid]]
     keep = (a < b) & (labels[a] != labels[b])
     a, b = a[keep], b[keep]
+    offsets = vertices[b] - vertices[a]
     shift: dict[tuple[int, int], np.ndarray] = {}
     support: dict[tuple[int, int], int] = {}
+    taken = [np.zeros(0, dtype=np.intp)]
     for pa, pb in set(zip(labels[a].tolist(), labels[b].tolist(), strict=True)):
-        mine = (labels[a] == pa) & (labels[b] == pb)
-        offset = np.median(vertices[b[mine]] - vertices[a[mine]], axis=0)
+        mine = np.flatnonzero((labels[a] == pa) & (labels[b] == pb))
+        if cut:
+            mine = mine[_agreeing(offsets[mine], SEAM_AGREEMENT * distance)]
+            if len(mine) < SEAM_PAIRS:
+                continue
+        offset = np.mean(offsets[mine], axis=0) if cut else np.median(offsets[mine], axis=0)
         shift[(pa, pb)], shift[(pb, pa)] = offset, -offset
-        support[(pa, pb)] = int(mine.sum())
+        support[(pa, pb)] = len(mine)
+        taken.append(mine)
+    seeds = np.concatenate(taken)
+    a, b = a[seeds], b[seeds]
     pairs = zip(labels[a].tolist(), labels[b].tolist(), strict=True)
-    offsets = np.array([shift[key] for key in pairs])
-    residual = np.linalg.norm(vertices[b] - offsets.reshape(-1, 3) - vertices[a], axis=1)
+    shifts = np.array([shift[key] for key in pairs]).reshape(-1, 3)
+    residual = np.linalg.norm(vertices[b] - shifts - vertices[a], axis=1)
     order = np.argsort(residual, kind="stable")
     return list(zip(a[order].tolist(), b[order].tolist(), strict=True)), shift, support
+
+
+def _agreeing(offsets: np.ndarray, agreement: float) -> np.ndarray:
+    """The indices of the largest set of offsets within ``agreement`` of one of them."""
+    from scipy.spatial import cKDTree  # as in `_seeds`
+
+    tree = cKDTree(offsets)
+    counts = tree.query_ball_point(offsets, agreement, return_length=True)
+    return np.asarray(tree.query_ball_point(offsets[np.argmax(counts)], agreement), dtype=np.intp)
 
 
 def _aligned(
