@@ -46,6 +46,13 @@ def _one_closed_manifold(mesh: Mesh) -> bool:
     return _components(mesh) == 1 and _is_closed(mesh)
 
 
+def _euler(mesh: Mesh) -> int:
+    """Vertices - edges + faces: 2 for a sphere, 0 for a torus, 2 less for each handle."""
+    return (
+        len(mesh.vertices) - len(mesh_edges(mesh.faces, len(mesh.vertices)).ends) + len(mesh.faces)
+    )
+
+
 def _unchanged(result, mesh) -> bool:
     """Whether the repair stage passed a mesh on as it was: the same arrays, nothing added."""
     same = result.vertices is mesh.vertices and result.faces is mesh.faces
@@ -147,8 +154,7 @@ def test_holes_are_closed():
     assert _has(repaired, "closed 4 holes")
     assert _one_closed_manifold(repaired)
     # Euler characteristic of a sphere, and the surface around the holes kept exactly.
-    n_edges = len(mesh_edges(repaired.faces, len(repaired.vertices)).ends)
-    assert len(repaired.vertices) - n_edges + len(repaired.faces) == 2
+    assert _euler(repaired) == 2
     assert _position_faces(v, holed) <= _position_faces(repaired.vertices, repaired.faces)
     intact = compute_signature(clean_mesh(v, f), Params(descriptor="cf")).vector
     auto = compute_signature(mesh, Params(descriptor="cf"))
@@ -195,7 +201,26 @@ def test_a_shape_cut_into_hundreds_of_pieces_is_stitched_back():
     assert _components(mesh) == 300
     repaired = repair_mesh(mesh)
     assert repaired.route == "repaired" and _has(repaired, "stitched")
-    assert _one_closed_manifold(repaired)
+    assert _one_closed_manifold(repaired) and _euler(repaired) == 0  # a torus still
+    assert _area(repaired) == pytest.approx(_area(Mesh(v, f)), rel=0.01)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_sphere_cut_by_planes_is_stitched_back_a_sphere(seed):
+    """Six planes cut a sphere into some 30 pieces, three or more meeting at a corner, each
+    moved outward (an exploded view): each seam is stitched to its own end, never on along the
+    next seam, which would join two pieces twice and add a handle."""
+    v, f = icosphere(5)
+    rng = np.random.default_rng(seed)
+    above = v[f].mean(axis=1) @ rng.normal(size=(3, 6)) > rng.uniform(-0.5, 0.5, 6)
+    code = above.astype(int) @ (1 << np.arange(6))
+    pieces = np.unique(code)
+    outward = np.array([v[f[code == piece]].mean(axis=(0, 1)) for piece in pieces])
+    shifts = 0.005 * _diagonal(v) * outward / np.linalg.norm(outward, axis=1)[:, None]
+    parts = [(v + shift, f[code == piece]) for piece, shift in zip(pieces, shifts, strict=True)]
+    repaired = repair_mesh(clean_mesh(*_stack(*parts)))
+    assert repaired.route == "repaired"
+    assert _one_closed_manifold(repaired) and _euler(repaired) == 2
     assert _area(repaired) == pytest.approx(_area(Mesh(v, f)), rel=0.01)
 
 
@@ -211,8 +236,7 @@ def test_fingers_cut_across_are_stitched_each_to_itself():
     repaired = repair_mesh(mesh)
     assert repaired.route == "repaired" and _has(repaired, "stitched")
     assert _components(repaired) == 4 and _is_closed(repaired)
-    n_edges = len(mesh_edges(repaired.faces, len(repaired.vertices)).ends)
-    assert len(repaired.vertices) - n_edges + len(repaired.faces) == 2 * 4  # four spheres
+    assert _euler(repaired) == 2 * 4  # four spheres
     assert _area(repaired) == pytest.approx(_area(Mesh(v, f)), rel=0.01)
 
 

@@ -278,8 +278,9 @@ def stitch(
     Seeds are pairs of boundary vertices of different parts within ``distance``; the parts
     they join are first moved back together (`_aligned`), then the seeds are taken shortest
     first, each vertex paired at most once. From each seed the two boundaries are walked in
-    step, both ways, pairing vertex after vertex while each next pair is within ``distance``
-    and on two parts. Each pair is merged at its midpoint.
+    step, both ways, pairing vertex after vertex while each next pair is on two parts and within
+    ``distance`` once the shift is undone (a cut seam's within `SEAM_AGREEMENT` of it). Each
+    pair is merged at its midpoint.
 
     Parameters
     ----------
@@ -327,6 +328,9 @@ def stitch(
             np.inf if offset is None else float(np.linalg.norm(vertices[y] - offset - vertices[x]))
         )
 
+    # A cut seam's pairs all agree with its shift: the walk stops where the seam ends, not on
+    # the next seam along, where another part meets both.
+    reach = SEAM_AGREEMENT * distance if cut else distance
     partner = np.full(n, -1)
     for a, b in seeds:
         if partner[a] >= 0 or partner[b] >= 0:
@@ -335,7 +339,7 @@ def stitch(
         for step_a in (following, preceding):
             step_b = min((following, preceding), key=lambda step: gap(step_a[a], step[b]))
             x, y = step_a[a], step_b[b]
-            while partner[x] < 0 and partner[y] < 0 and gap(x, y) <= distance:
+            while partner[x] < 0 and partner[y] < 0 and gap(x, y) <= reach:
                 partner[x], partner[y] = y, x
                 x, y = step_a[x], step_b[y]
     first = np.flatnonzero(np.arange(n) < partner)
