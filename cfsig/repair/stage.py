@@ -384,10 +384,10 @@ def _seeds(
     shift: dict[tuple[int, int], np.ndarray] = {}
     support: dict[tuple[int, int], int] = {}
     taken = [np.zeros(0, dtype=np.intp)]
-    for pa, pb in set(zip(labels[a].tolist(), labels[b].tolist(), strict=True)):
-        mine = np.flatnonzero((labels[a] == pa) & (labels[b] == pb))
+    for (pa, pb), mine in _groups(labels[a], labels[b]).items():
         if cut:
-            mine = mine[_agreeing(offsets[mine], SEAM_AGREEMENT * distance)]
+            if len(mine) >= SEAM_PAIRS:
+                mine = mine[_agreeing(offsets[mine], SEAM_AGREEMENT * distance)]
             if len(mine) < SEAM_PAIRS:
                 continue
         offset = np.mean(offsets[mine], axis=0) if cut else np.median(offsets[mine], axis=0)
@@ -401,6 +401,17 @@ def _seeds(
     residual = np.linalg.norm(vertices[b] - shifts - vertices[a], axis=1)
     order = np.argsort(residual, kind="stable")
     return list(zip(a[order].tolist(), b[order].tolist(), strict=True)), shift, support
+
+
+def _groups(first: np.ndarray, second: np.ndarray) -> dict[tuple[int, int], np.ndarray]:
+    """The indices of each pair of labels, ascending, in the order the set of pairs iterates."""
+    if len(first) == 0:
+        return {}
+    keys = first.astype(np.int64) * (int(second.max()) + 1) + second
+    order = np.argsort(keys, kind="stable")
+    starts = np.flatnonzero(np.diff(keys[order])) + 1
+    found = {(int(first[run[0]]), int(second[run[0]])): run for run in np.split(order, starts)}
+    return {pair: found[pair] for pair in set(zip(first.tolist(), second.tolist(), strict=True))}
 
 
 def _agreeing(offsets: np.ndarray, agreement: float) -> np.ndarray:
