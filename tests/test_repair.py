@@ -394,6 +394,23 @@ def test_open_fragments_that_add_up_are_the_objects_parts():
         assert kept == (route == "proxy")
 
 
+def test_a_lone_triangle_is_kept_as_a_flat_closed_part():
+    """A part of one face holding more than a fragment's share of the area (a road sign) is
+    closed by a fan from its centroid, as ears close a larger sheet: closing it by its own face
+    again would leave a double that the cleaning removes, and the model would go to the proxy."""
+    v, f = SPHERE
+    side = np.sqrt(4 * 0.05 * 4 * np.pi / np.sqrt(3))  # equilateral, 5% of the sphere's area
+    lone = np.array([[1.5, 0, 0], [1.5 + side, 0, 0], [1.5 + side / 2, side * np.sqrt(3) / 2, 0]])
+    repaired = repair_mesh(clean_mesh(*_stack((v, f), (lone, np.array([[0, 1, 2]])))))
+    assert repaired.route == "repaired" and _has(repaired, "closed 1 holes")
+    assert _is_closed(repaired) and _components(repaired) == 2
+    sheet = repaired.parts[repaired.faces[:, 0]] != repaired.parts[0]
+    sheet_area = face_areas(edge_lengths(repaired.vertices, repaired.faces[sheet])).sum()
+    np.testing.assert_allclose(sheet_area, 2 * 0.05 * 4 * np.pi, rtol=1e-9)  # both sides
+    assert np.array_equal(repaired.vertices[: len(v)], v)
+    assert np.array_equal(repaired.faces[~sheet], f)
+
+
 def test_too_many_parts_go_to_the_proxy(monkeypatch):
     monkeypatch.setattr(repair, "MAX_PARTS", 1)
     result = repair_mesh(clean_mesh(*_fin_and_stray()))  # two parts: finned sphere, stray

@@ -494,8 +494,8 @@ def fill_holes(
 
     A slit between two boundaries that were not stitched closes as a zip of thin triangles; a
     fan from the loop's centroid would span a curved slit with large ones (docs/method.md).
-    An ear whose new edge the mesh already has is not clipped; what no ear can close is closed
-    by a fan from its centroid.
+    An ear whose new edge the mesh already has is not clipped; what no ear can close, and a
+    loop of three that bounds a face already, is closed by a fan from its centroid.
 
     Parameters
     ----------
@@ -524,10 +524,14 @@ def fill_holes(
     on_loop[np.concatenate(loops)] = True
     near = edges.ends[on_loop[edges.ends].all(axis=1)]
     taken = set(map(tuple, near.tolist()))  # (i, j), i < j
+    # A loop of three may bound a face already (a part of one face): closing it by that face
+    # again would leave a double, which the cleaning removes; a fan keeps it as a flat sheet,
+    # as ears keep a larger open sheet.
+    present = set(map(tuple, np.sort(faces[on_loop[faces].all(axis=1)], axis=1).tolist()))
     new_vertices, new_faces = [vertices], [faces]
     for loop in loops:
         triangles, rest = _clip_ears(vertices, loop.tolist(), taken)
-        if len(rest) > 3:
+        if len(rest) > 3 or tuple(sorted(rest)) in present:
             centre = len(vertices) + len(new_vertices) - 1
             new_vertices.append(vertices[rest].mean(axis=0, keepdims=True))
             triangles += [
