@@ -11,6 +11,7 @@ from cfsig.descriptors import intrinsic, lf, rigid
 from cfsig.descriptors.signature import compute_signature
 from cfsig.files.mesh import clean_mesh
 from cfsig.params import Params
+from cfsig.repair.stage import repair_mesh
 from cfsig.search.l1 import l1_numpy
 from tests.helpers import (
     SHAPES,
@@ -145,13 +146,14 @@ def test_the_command_line_computes_indexes_queries_evaluates_and_checks(tmp_path
 
 
 def test_signature_goes_through_the_repair_stage():
-    """An open tube takes the proxy, under ``auto`` as under ``proxy`` (where ``intrinsic``
-    repairs it locally), and is measured like its proxy."""
+    """An open tube is mended locally under ``auto``, as for ``intrinsic``, and rebuilt under
+    ``proxy``; either way it is measured like the mesh the repair stage made of it."""
     mesh = clean_mesh(*open_cylinder())
-    sig = compute_signature(mesh, RIGID)
-    forced = compute_signature(mesh, Params(descriptor="rigid", repair="proxy"))
-    assert sig.route == "proxy" and sig.phi is None
-    assert np.array_equal(sig.vector, forced.vector)
-    assert compute_signature(mesh, Params()).route == "repaired"
-    assert sig.vector.shape == (rigid.LENGTH,) and np.isfinite(sig.vector).all()
-    assert np.array_equal(sig.vector[rigid.HEAD :], np.round(sig.vector[rigid.HEAD :]))
+    for mode, route in (("auto", "repaired"), ("proxy", "proxy")):
+        params = Params(descriptor="rigid", repair=mode)
+        sig = compute_signature(mesh, params)
+        assert sig.route == route and sig.phi is None
+        made = repair_mesh(mesh, mode)
+        assert np.array_equal(sig.vector, rigid.rigid_vector(made, params, None, "auto").vector)
+        assert sig.vector.shape == (rigid.LENGTH,) and np.isfinite(sig.vector).all()
+        assert np.array_equal(sig.vector[rigid.HEAD :], np.round(sig.vector[rigid.HEAD :]))

@@ -79,9 +79,6 @@ class Descriptor:
         `ConformalFactor` when ``needs_phi`` or the caller solved it anyway, else None.
     distance : Distance or None
         How two vectors compare, when not by their L1 distance (None).
-    auto_repair : {"auto", "proxy"}
-        The repair mode (`cfsig.repair.stage.repair_mesh`) that ``Params.repair == "auto"``
-        stands for: local repairs first, or the proxy for every mesh that is not clean.
     """
 
     name: str
@@ -89,4 +86,3 @@ class Descriptor:
     layout: Callable[[Params], Layout]
     compute: Callable[[Mesh, Params, ConformalFactor | None, str], Computed]
     distance: Distance | None = None
-    auto_repair: str = "auto"

@@ -2,8 +2,7 @@
 extrinsic shape that the light field descriptor ``lf`` and the spherical harmonic descriptor
 ``sh`` see, together with the channels of the default descriptor ``intrinsic``.
 
-The vector holds, computed on the repaired mesh by those descriptors' own functions (under
-``--repair auto``, the proxy for every mesh that is not clean: `DESCRIPTOR.auto_repair`):
+The vector holds, computed on the repaired mesh by those descriptors' own functions:
 
 - the heat and curvature channels of the ``intrinsic`` vector
   (`cfsig.descriptors.intrinsic.intrinsic_vector`), each divided by its median in `MEDIANS`
@@ -175,5 +174,4 @@ DESCRIPTOR = Descriptor(
     layout=lambda params: Layout(LENGTH),
     compute=rigid_vector,
     distance=Distance(exact=rigid_distances, bound=rigid_bounds),
-    auto_repair="proxy",  # docs/method.md: the extrinsic channels read the proxy's volume best
 )

@@ -86,8 +86,7 @@ def compute_signature(
     ----------
     mesh : Mesh
         A checked mesh, as `read_mesh` or `clean_mesh` return; it goes through
-        `cfsig.repair.stage.repair_mesh` with ``params.repair`` first (``"auto"`` as the
-        descriptor's `Descriptor.auto_repair`).
+        `cfsig.repair.stage.repair_mesh` with ``params.repair`` first.
     params : Params
         Signature parameters.
     solver : {"auto", "cholmod", "eigen", "scipy"}
@@ -117,8 +116,7 @@ def _repair_and_sign(
     """`compute_signature`, also returning the repaired mesh that phi lives on."""
     start = time.perf_counter()
     descriptor = descriptors.get(params.descriptor)
-    mode = descriptor.auto_repair if params.repair == "auto" else params.repair
-    mesh = repair_mesh(mesh, mode, limits)
+    mesh = repair_mesh(mesh, params.repair, limits)
     needs_phi = phi or descriptor.needs_phi
     cf = conformal_factor(mesh, params.mollify, solver) if needs_phi else None
     vector, cells, ops = descriptor.compute(mesh, params, cf, solver)
