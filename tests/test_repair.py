@@ -224,6 +224,26 @@ def test_a_sphere_cut_by_planes_is_stitched_back_a_sphere(seed):
     assert _area(repaired) == pytest.approx(_area(Mesh(v, f)), rel=0.01)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_stitching_never_folds_faces_onto_each_other(seed):
+    """Six planes cut a sphere into some 30 pieces, each moved its own random way, so that
+    neighbours overlap or gap: every seam is zipped with its two faces on either side of it,
+    never folded onto one side, and the sphere comes back an orientable closed surface."""
+    v, f = icosphere(5)
+    rng = np.random.default_rng(seed)
+    above = v[f].mean(axis=1) @ rng.normal(size=(3, 6)) > rng.uniform(-0.5, 0.5, 6)
+    code = above.astype(int) @ (1 << np.arange(6))
+    pieces = np.unique(code)
+    shifts = 0.005 * _diagonal(v) * rng.normal(size=(len(pieces), 3))
+    parts = [(v + shift, f[code == piece]) for piece, shift in zip(pieces, shifts, strict=True)]
+    repaired = repair_mesh(clean_mesh(*_stack(*parts)))
+    assert repaired.route == "repaired" and _one_closed_manifold(repaired)
+    directed = repaired.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    assert len(np.unique(directed, axis=0)) == len(directed)  # each edge run both ways once
+    assert _euler(repaired) == 2
+    assert _area(repaired) == pytest.approx(_area(Mesh(v, f)), rel=0.01)
+
+
 def test_fingers_cut_across_are_stitched_each_to_itself():
     """Four tubes side by side, each meshed on its own, 1% of the diagonal apart, cut across at
     three heights and the pieces moved apart: each seam is stitched, and no tube is joined to

@@ -57,6 +57,10 @@ STITCH_DISTANCE = 0.02
 # to within SEAM_AGREEMENT of the stitching distance (`_seeds`), 0.1% of the diagonal.
 SEAM_AGREEMENT = 0.05
 SEAM_PAIRS = 3
+# Two boundary edges are not zipped when their faces would lie on the same side of the merged
+# edge, within about 25 degrees of each other: folded onto each other (`stitch`). A seam along
+# a crease sharper than that is left open, for `fill_holes`' ears.
+FOLDED = 0.9
 # Rounds of stitching at most (`stitch` pairs each vertex once a round).
 STITCH_ROUNDS = 3
 # A part's faces within this fraction of the diagonal of a larger part's surface cover it twice.
@@ -279,8 +283,9 @@ def stitch(
     they join are first moved back together (`_aligned`), then the seeds are taken shortest
     first, each vertex paired at most once. From each seed the two boundaries are walked in
     step, both ways, pairing vertex after vertex while each next pair is on two parts and within
-    ``distance`` once the shift is undone (a cut seam's within `SEAM_AGREEMENT` of it). Each
-    pair is merged at its midpoint.
+    ``distance`` once the shift is undone (a cut seam's within `SEAM_AGREEMENT` of it), and the
+    faces on the two edges walked would not fold onto each other (`FOLDED`); a seed from which
+    no such step leads is not paired. Each pair is merged at its midpoint.
 
     Parameters
     ----------
@@ -331,17 +336,32 @@ def stitch(
     # A cut seam's pairs all agree with its shift: the walk stops where the seam ends, not on
     # the next seam along, where another part meets both.
     reach = SEAM_AGREEMENT * distance if cut else distance
+    normals = _edge_normals(vertices, faces, edges, following)
+
+    def zips(x: int, step_x: np.ndarray, y: int, step_y: np.ndarray) -> bool:
+        """Whether the walk from the pair (x, y) may take the next pair: within reach once the
+        shift is undone, its faces not folded onto each other (`FOLDED`: a zip's faces run along
+        the merged edge in opposite directions, whatever the parts' orientation)."""
+        normal_x = normals[x] if step_x is following else -normals[preceding[x]]
+        normal_y = normals[y] if step_y is following else -normals[preceding[y]]
+        return gap(step_x[x], step_y[y]) <= reach and bool(normal_x @ normal_y <= FOLDED)
+
     partner = np.full(n, -1)
     for a, b in seeds:
         if partner[a] >= 0 or partner[b] >= 0:
             continue
+        walks = [
+            (step_a, min((following, preceding), key=lambda step: gap(step_a[a], step[b])))
+            for step_a in (following, preceding)
+        ]
+        if not any(zips(a, step_a, b, step_b) for step_a, step_b in walks):
+            continue  # no seam runs through the pair: merged, its faces would fold or pinch
         partner[a], partner[b] = b, a
-        for step_a in (following, preceding):
-            step_b = min((following, preceding), key=lambda step: gap(step_a[a], step[b]))
-            x, y = step_a[a], step_b[b]
-            while partner[x] < 0 and partner[y] < 0 and gap(x, y) <= reach:
-                partner[x], partner[y] = y, x
+        for step_a, step_b in walks:
+            x, y = a, b
+            while partner[step_a[x]] < 0 and partner[step_b[y]] < 0 and zips(x, step_a, y, step_b):
                 x, y = step_a[x], step_b[y]
+                partner[x], partner[y] = y, x
     first = np.flatnonzero(np.arange(n) < partner)
     if len(first) == 0:
         return vertices, faces, 0
@@ -351,6 +371,26 @@ def stitch(
     remap = np.arange(n)
     remap[second] = first
     return moved, remap[faces], len(first)
+
+
+def _edge_normals(
+    vertices: np.ndarray, faces: np.ndarray, edges: Edges, following: np.ndarray
+) -> np.ndarray:
+    """For each boundary vertex x, the unit normal of the face on the boundary edge from x to
+    ``following[x]``, its corners taken from x to ``following[x]`` whichever way the face runs
+    ((n, 3), zero elsewhere and for a face without area)."""
+    boundary = np.flatnonzero(np.diff(edges.starts) == 1)
+    half = edges.order[edges.starts[boundary]]
+    face, corner = half // 3, half % 3
+    start, end = faces[face, corner], faces[face, (corner + 1) % 3]
+    apex = faces[face, (corner + 2) % 3]
+    tail = np.where(following[start] == end, start, end)
+    head = np.where(following[start] == end, end, start)
+    normal = np.cross(vertices[head] - vertices[tail], vertices[apex] - vertices[tail])
+    length = np.linalg.norm(normal, axis=1)[:, None]
+    normals = np.zeros_like(vertices)
+    normals[tail] = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
+    return normals
 
 
 def _seeds(
