@@ -53,7 +53,7 @@ stage to undo but the ways a scan of a shape differs from its model:
   diagonal in a random direction (spikes, a scanner's outliers).
 
 ``measure`` computes the clean signatures (the clean index) and the messy ones with
-`cfsig.batch.compute_many`; each messy copy queries the clean index by L1 and its original's
+`cfsig.batch.compute_many`; each messy copy queries the clean index by distance and its original's
 rank is counted (ties pessimistically), and the share of copies that took the proxy. The
 messy collection (file i replaced by its copy of kind i mod K, files in sorted order, the proxy
 kinds left out) and each single-kind collection are evaluated leave-one-out
@@ -87,7 +87,7 @@ from cfsig import Params, compute_many, evaluate_distances
 from cfsig.descriptors import NAMES as DESCRIPTORS
 from cfsig.params import REPAIR_MODES
 from cfsig.repair.simplify import decimate
-from cfsig.search.nearest import l1_distances
+from cfsig.search.nearest import distances
 
 Mesh = tuple[np.ndarray, np.ndarray]  # vertices (n, 3) float64, faces (m, 3) int64
 SUFFIXES = (".off", ".obj", ".ply", ".stl")
@@ -683,14 +683,19 @@ def signatures(paths: Sequence[Path], params: Params, jobs: int) -> tuple[dict, 
 
 
 def own_ranks(
-    queries: np.ndarray, index: np.ndarray, own: np.ndarray, same: np.ndarray | None = None
+    descriptor: str,
+    queries: np.ndarray,
+    index: np.ndarray,
+    own: np.ndarray,
+    same: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Rank of row ``own[i]`` of ``index`` by L1 to query i (1 = nearest; ties pessimistic).
+    """Rank of row ``own[i]`` of ``index`` by the descriptor's distance to query i (1 = nearest;
+    ties pessimistic).
 
     ``same[j, k]``, when given, marks clean meshes k that are duplicates of j (`duplicates`):
     they do not rank ahead of their original.
     """
-    d = l1_distances(queries, index)
+    d = distances(descriptor, queries, index)
     rows = np.arange(len(own))
     ahead = d <= d[rows, own][:, None]
     if same is not None:
@@ -699,14 +704,15 @@ def own_ranks(
     return ahead.sum(axis=1)
 
 
-def duplicates(index: np.ndarray) -> np.ndarray:
+def duplicates(descriptor: str, index: np.ndarray) -> np.ndarray:
     """Pairs of clean meshes whose signatures are within `DUPLICATE` of each other."""
-    same = l1_distances(index, index) < DUPLICATE
+    same = distances(descriptor, index, index) < DUPLICATE
     np.fill_diagonal(same, False)
     return same
 
 
 def collection(
+    descriptor: str,
     vectors: Sequence[np.ndarray | None],
     labels: Sequence[str],
     models: np.ndarray | None = None,
@@ -724,7 +730,7 @@ def collection(
         return {**found, **dict.fromkeys(MEASURES, float("nan"))}
     matrix = np.array([vectors[i] for i in kept])
     against = matrix if models is None else models[kept]
-    return {**found, **evaluate_distances(l1_distances(matrix, against), names).measures}
+    return {**found, **evaluate_distances(distances(descriptor, matrix, against), names).measures}
 
 
 def measure(
@@ -746,21 +752,25 @@ def measure(
         messy.update(found)
         failures += failed
     index = np.array([vector(clean[f]) for f in files])
-    n, copies, collections = len(files), [], {"clean": collection(list(index), labels)}
+    n, copies, collections = (
+        len(files),
+        [],
+        {"clean": collection(params.descriptor, list(index), labels)},
+    )
     mess = [kind for kind in kinds if kind not in PROXY_KINDS] or kinds
     mixed = [paths[mess[i % len(mess)]][i] for i in range(n)]
     collections["messy (kinds round-robin)"] = collection(
-        [vector(messy[p]) if p in messy else None for p in mixed], labels
+        params.descriptor, [vector(messy[p]) if p in messy else None for p in mixed], labels
     )
-    ranks, ranks_as_one, same = {}, {}, duplicates(index)
+    ranks, ranks_as_one, same = {}, {}, duplicates(params.descriptor, index)
     for kind in kinds:
         ok = np.array([i for i, p in enumerate(paths[kind]) if p in messy], dtype=np.int64)
         ranks[kind] = np.full(n, n + 1)  # a failed copy ranks after every mesh
         ranks_as_one[kind] = ranks[kind].copy()
         if len(ok):
             queries = np.array([vector(messy[paths[kind][i]]) for i in ok])
-            ranks[kind][ok] = own_ranks(queries, index, ok)
-            ranks_as_one[kind][ok] = own_ranks(queries, index, ok, same)
+            ranks[kind][ok] = own_ranks(params.descriptor, queries, index, ok)
+            ranks_as_one[kind][ok] = own_ranks(params.descriptor, queries, index, ok, same)
         seconds = [messy[p].seconds for p in paths[kind] if p in messy]
         copies.append(
             {
@@ -779,8 +789,10 @@ def measure(
             }
         )
         vectors = [vector(messy[p]) if p in messy else None for p in paths[kind]]
-        collections[f"all {kind}"] = collection(vectors, labels)
-        collections[f"each {kind} against the clean others"] = collection(vectors, labels, index)
+        collections[f"all {kind}"] = collection(params.descriptor, vectors, labels)
+        collections[f"each {kind} against the clean others"] = collection(
+            params.descriptor, vectors, labels, index
+        )
     return {
         "command": command(),
         "params": params.to_json(),
@@ -814,7 +826,7 @@ def markdown(results: dict, checks: list[dict]) -> str:
         f"Measured with `{results['command']}`: {results['meshes']} clean meshes, parameters "
         f"`{results['params']}`; kinds of mess as in the docstring of benchmarks/messy.py.",
         "",
-        "Each messy copy queries the index of the clean meshes by L1; the rank is its own "
+        "Each messy copy queries the index of the clean meshes by distance; the rank is its own "
         "original's (1 = nearest, ties counted against it, a failed file after every mesh):",
         "",
         common.table(list(copies[0]), [list(r.values()) for r in copies]),
