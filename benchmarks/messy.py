@@ -752,11 +752,8 @@ def measure(
         messy.update(found)
         failures += failed
     index = np.array([vector(clean[f]) for f in files])
-    n, copies, collections = (
-        len(files),
-        [],
-        {"clean": collection(params.descriptor, list(index), labels)},
-    )
+    n, copies = len(files), []
+    collections = {"clean": collection(params.descriptor, list(index), labels)}
     mess = [kind for kind in kinds if kind not in PROXY_KINDS] or kinds
     mixed = [paths[mess[i % len(mess)]][i] for i in range(n)]
     collections["messy (kinds round-robin)"] = collection(

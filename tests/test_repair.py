@@ -205,19 +205,24 @@ def test_a_shape_cut_into_hundreds_of_pieces_is_stitched_back():
     assert _area(repaired) == pytest.approx(_area(Mesh(v, f)), rel=0.01)
 
 
+def _sphere_cut_by_planes(rng):
+    """A fine sphere and the faces of each piece that six random planes cut it into (some 30,
+    three or more meeting at a corner)."""
+    v, f = icosphere(5)
+    above = v[f].mean(axis=1) @ rng.normal(size=(3, 6)) > rng.uniform(-0.5, 0.5, 6)
+    code = above.astype(int) @ (1 << np.arange(6))
+    return v, f, [f[code == piece] for piece in np.unique(code)]
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_a_sphere_cut_by_planes_is_stitched_back_a_sphere(seed):
     """Six planes cut a sphere into some 30 pieces, three or more meeting at a corner, each
     moved outward (an exploded view): each seam is stitched to its own end, never on along the
     next seam, which would join two pieces twice and add a handle."""
-    v, f = icosphere(5)
-    rng = np.random.default_rng(seed)
-    above = v[f].mean(axis=1) @ rng.normal(size=(3, 6)) > rng.uniform(-0.5, 0.5, 6)
-    code = above.astype(int) @ (1 << np.arange(6))
-    pieces = np.unique(code)
-    outward = np.array([v[f[code == piece]].mean(axis=(0, 1)) for piece in pieces])
+    v, f, pieces = _sphere_cut_by_planes(np.random.default_rng(seed))
+    outward = np.array([v[piece].mean(axis=(0, 1)) for piece in pieces])
     shifts = 0.005 * _diagonal(v) * outward / np.linalg.norm(outward, axis=1)[:, None]
-    parts = [(v + shift, f[code == piece]) for piece, shift in zip(pieces, shifts, strict=True)]
+    parts = [(v + shift, piece) for piece, shift in zip(pieces, shifts, strict=True)]
     repaired = repair_mesh(clean_mesh(*_stack(*parts)))
     assert repaired.route == "repaired"
     assert _one_closed_manifold(repaired) and _euler(repaired) == 2
@@ -229,13 +234,10 @@ def test_stitching_never_folds_faces_onto_each_other(seed):
     """Six planes cut a sphere into some 30 pieces, each moved its own random way, so that
     neighbours overlap or gap: every seam is zipped with its two faces on either side of it,
     never folded onto one side, and the sphere comes back an orientable closed surface."""
-    v, f = icosphere(5)
     rng = np.random.default_rng(seed)
-    above = v[f].mean(axis=1) @ rng.normal(size=(3, 6)) > rng.uniform(-0.5, 0.5, 6)
-    code = above.astype(int) @ (1 << np.arange(6))
-    pieces = np.unique(code)
+    v, f, pieces = _sphere_cut_by_planes(rng)
     shifts = 0.005 * _diagonal(v) * rng.normal(size=(len(pieces), 3))
-    parts = [(v + shift, f[code == piece]) for piece, shift in zip(pieces, shifts, strict=True)]
+    parts = [(v + shift, piece) for piece, shift in zip(pieces, shifts, strict=True)]
     repaired = repair_mesh(clean_mesh(*_stack(*parts)))
     assert repaired.route == "repaired" and _one_closed_manifold(repaired)
     directed = repaired.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
