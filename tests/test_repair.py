@@ -5,6 +5,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import igl
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -244,6 +245,45 @@ def test_stitching_never_folds_faces_onto_each_other(seed):
     assert len(np.unique(directed, axis=0)) == len(directed)  # each edge run both ways once
     assert _euler(repaired) == 2
     assert _area(repaired) == pytest.approx(_area(Mesh(v, f)), rel=0.01)
+
+
+def _moebius_halves(around: int = 60, across: int = 6) -> list[tuple[np.ndarray, np.ndarray]]:
+    """A Möbius band cut across in two halves, each a strip with its own vertices."""
+    halves = []
+    for start in (0, around // 2):
+        u = 2 * np.pi * np.arange(start, start + around // 2 + 1) / around
+        w = np.linspace(-0.3, 0.3, across)
+        uu, ww = np.meshgrid(u, w, indexing="ij")
+        radius = 1 + ww * np.cos(uu / 2)
+        v = np.column_stack(
+            [
+                (radius * np.cos(uu)).ravel(),
+                (radius * np.sin(uu)).ravel(),
+                (ww * np.sin(uu / 2)).ravel(),
+            ]
+        )
+        i, j = np.meshgrid(np.arange(around // 2), np.arange(across - 1), indexing="ij")
+        corner = (i * across + j).ravel()
+        f = np.vstack(
+            [
+                np.column_stack([corner, corner + across, corner + 1]),
+                np.column_stack([corner + 1, corner + across, corner + across + 1]),
+            ]
+        )
+        halves.append((v, f))
+    return halves
+
+
+def test_stitching_never_makes_a_surface_that_cannot_be_oriented():
+    """The two halves of a Möbius band meet along two seams, each zipped alone an orientable
+    strip, both together a band with one side: one seam is stitched, the other left open."""
+    mesh = clean_mesh(*_stack(*_moebius_halves()), weld=False)
+    vertices, faces, pairs = repair.stitch(mesh.vertices, mesh.faces, None, 0.02, cut=True)
+    stitched = clean_mesh(vertices, faces, weld=False)
+    assert pairs == 6 and _components(stitched) == 1  # one seam of six vertices
+    oriented = np.asarray(igl.bfs_orient(stitched.faces)[0])
+    directed = oriented[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    assert len(np.unique(directed, axis=0)) == len(directed)  # each edge run both ways once
 
 
 def test_fingers_cut_across_are_stitched_each_to_itself():

@@ -285,7 +285,8 @@ def stitch(
     step, both ways, pairing vertex after vertex while each next pair is on two parts and within
     ``distance`` once the shift is undone (a cut seam's within `SEAM_AGREEMENT` of it), and the
     faces on the two edges walked would not fold onto each other (`FOLDED`); a seed from which
-    no such step leads is not paired. Each pair is merged at its midpoint.
+    no such step leads is not paired, nor one whose seam, with those taken before it, would join
+    the parts into a surface that cannot be oriented. Each pair is merged at its midpoint.
 
     Parameters
     ----------
@@ -336,7 +337,24 @@ def stitch(
     # A cut seam's pairs all agree with its shift: the walk stops where the seam ends, not on
     # the next seam along, where another part meets both.
     reach = SEAM_AGREEMENT * distance if cut else distance
-    normals = _edge_normals(vertices, faces, edges, following)
+    normals, runs = _boundary_sides(vertices, faces, edges, following)
+    # The parts joined so far, each with whether it must be reversed to agree with the part it
+    # is joined to (a union-find whose links carry that parity).
+    joined_to = np.arange(int(labels.max()) + 1)
+    reversed_to = np.zeros(len(joined_to), dtype=bool)
+
+    def joined(part: int) -> tuple[int, bool]:
+        """The first part of the parts joined with ``part``, and whether ``part`` is reversed
+        against it."""
+        reverse = False
+        while joined_to[part] != part:
+            reverse ^= bool(reversed_to[part])
+            part = int(joined_to[part])
+        return part, reverse
+
+    def forward(x: int, step: np.ndarray) -> bool:
+        """Whether the walk's edge from x runs as the faces of x's part, once oriented, run."""
+        return bool(runs[x]) if step is following else not runs[preceding[x]]
 
     def zips(x: int, step_x: np.ndarray, y: int, step_y: np.ndarray) -> bool:
         """Whether the walk from the pair (x, y) may take the next pair: within reach once the
@@ -354,8 +372,16 @@ def stitch(
             (step_a, min((following, preceding), key=lambda step: gap(step_a[a], step[b])))
             for step_a in (following, preceding)
         ]
-        if not any(zips(a, step_a, b, step_b) for step_a, step_b in walks):
+        valid = [(step_a, step_b) for step_a, step_b in walks if zips(a, step_a, b, step_b)]
+        if not valid:
             continue  # no seam runs through the pair: merged, its faces would fold or pinch
+        # Zipped edges must run opposite ways: if both run forward, one part must be reversed.
+        reverse = forward(a, valid[0][0]) == forward(b, valid[0][1])
+        (first_a, reverse_a), (first_b, reverse_b) = joined(labels[a]), joined(labels[b])
+        if first_a == first_b and reverse_a ^ reverse_b != reverse:
+            continue  # joined already the other way: the surface would have one side
+        if first_a != first_b:
+            joined_to[first_b], reversed_to[first_b] = first_a, reverse_a ^ reverse_b ^ reverse
         partner[a], partner[b] = b, a
         for step_a, step_b in walks:
             x, y = a, b
@@ -373,12 +399,13 @@ def stitch(
     return moved, remap[faces], len(first)
 
 
-def _edge_normals(
+def _boundary_sides(
     vertices: np.ndarray, faces: np.ndarray, edges: Edges, following: np.ndarray
-) -> np.ndarray:
+) -> tuple[np.ndarray, np.ndarray]:
     """For each boundary vertex x, the unit normal of the face on the boundary edge from x to
     ``following[x]``, its corners taken from x to ``following[x]`` whichever way the face runs
-    ((n, 3), zero elsewhere and for a face without area)."""
+    ((n, 3), zero elsewhere and for a face without area); and whether that face, once its part
+    is oriented (libigl's `bfs_orient`), runs from x to ``following[x]`` ((n,) bool)."""
     boundary = np.flatnonzero(np.diff(edges.starts) == 1)
     half = edges.order[edges.starts[boundary]]
     face, corner = half // 3, half % 3
@@ -390,7 +417,14 @@ def _edge_normals(
     length = np.linalg.norm(normal, axis=1)[:, None]
     normals = np.zeros_like(vertices)
     normals[tail] = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
-    return normals
+    import igl
+
+    oriented = np.asarray(igl.bfs_orient(faces)[0])[face]
+    first = np.argmax(oriented == faces[face, :1], axis=1)
+    kept = oriented[np.arange(len(face)), (first + 1) % 3] == faces[face, 1]  # not reversed
+    runs = np.zeros(len(vertices), dtype=bool)
+    runs[tail] = (start == tail) == kept
+    return normals, runs
 
 
 def _seeds(
