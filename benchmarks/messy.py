@@ -564,8 +564,8 @@ SCAN_KINDS: dict[str, Kind] = {
     "remesh": remesh,
 }
 KINDS = {**MESS_KINDS, **PROXY_KINDS, **SCAN_KINDS}
-# The kinds written as binary STL, as soups are; the others are written as OFF.
-SUFFIX = {"soup": ".stl", "everything-1": ".stl", "everything-2": ".stl"}
+# The soups are written as binary STL, the other kinds as OFF.
+SUFFIX = {kind: ".stl" for kind in MESS_KINDS if kind.split("-")[0] in ("soup", "everything")}
 
 
 # --- files ----------------------------------------------------------------------------------

@@ -21,7 +21,7 @@ from cfsig.params import Params
 from cfsig.repair import proxy as proxy_module
 from cfsig.repair import stage as repair
 from cfsig.repair.stage import boundary_loops, repair_mesh
-from tests.helpers import icosphere, open_cylinder, torus, write_off
+from tests.helpers import grid_surface, icosphere, open_cylinder, torus, write_off
 from tests.helpers import l1 as _l1
 
 SPHERE = icosphere(3)
@@ -249,29 +249,18 @@ def test_stitching_never_folds_faces_onto_each_other(seed):
 
 def _moebius_halves(around: int = 60, across: int = 6) -> list[tuple[np.ndarray, np.ndarray]]:
     """A Möbius band cut across in two halves, each a strip with its own vertices."""
-    halves = []
-    for start in (0, around // 2):
-        u = 2 * np.pi * np.arange(start, start + around // 2 + 1) / around
-        w = np.linspace(-0.3, 0.3, across)
-        uu, ww = np.meshgrid(u, w, indexing="ij")
-        radius = 1 + ww * np.cos(uu / 2)
-        v = np.column_stack(
-            [
-                (radius * np.cos(uu)).ravel(),
-                (radius * np.sin(uu)).ravel(),
-                (ww * np.sin(uu / 2)).ravel(),
-            ]
-        )
-        i, j = np.meshgrid(np.arange(around // 2), np.arange(across - 1), indexing="ij")
-        corner = (i * across + j).ravel()
-        f = np.vstack(
-            [
-                np.column_stack([corner, corner + across, corner + 1]),
-                np.column_stack([corner + 1, corner + across, corner + across + 1]),
-            ]
-        )
-        halves.append((v, f))
-    return halves
+
+    def half(start: float):
+        def point(u, v):
+            angle, width = start + np.pi * u, 0.6 * v - 0.3
+            radius = 1 + width * np.cos(angle / 2)
+            return np.column_stack(
+                [radius * np.cos(angle), radius * np.sin(angle), width * np.sin(angle / 2)]
+            )
+
+        return grid_surface(around // 2 + 1, across, False, False, point)
+
+    return [half(0.0), half(np.pi)]
 
 
 def test_stitching_never_makes_a_surface_that_cannot_be_oriented():

@@ -323,6 +323,8 @@ def stitch(
         following[loop], preceding[loop] = np.roll(loop, -1), np.roll(loop, 1)
     candidates = np.concatenate(loops)
     seeds, shift, support = _seeds(vertices, labels, candidates, distance, cut)
+    if not seeds:
+        return vertices, faces, 0
     if shift:
         vertices = _aligned(vertices, labels, shift, support)
         seeds, shift, _ = _seeds(vertices, labels, candidates, distance, cut)
@@ -352,17 +354,23 @@ def stitch(
             part = int(joined_to[part])
         return part, reverse
 
+    def walked(x: int, step: np.ndarray) -> tuple[int, bool]:
+        """The boundary edge a walk takes from x, by its first vertex along the loop, and
+        whether the walk runs along the loop."""
+        return (x, True) if step is following else (int(preceding[x]), False)
+
     def forward(x: int, step: np.ndarray) -> bool:
         """Whether the walk's edge from x runs as the faces of x's part, once oriented, run."""
-        return bool(runs[x]) if step is following else not runs[preceding[x]]
+        edge, along = walked(x, step)
+        return bool(runs[edge]) == along
 
     def zips(x: int, step_x: np.ndarray, y: int, step_y: np.ndarray) -> bool:
         """Whether the walk from the pair (x, y) may take the next pair: within reach once the
         shift is undone, its faces not folded onto each other (`FOLDED`: a zip's faces run along
         the merged edge in opposite directions, whatever the parts' orientation)."""
-        normal_x = normals[x] if step_x is following else -normals[preceding[x]]
-        normal_y = normals[y] if step_y is following else -normals[preceding[y]]
-        return gap(step_x[x], step_y[y]) <= reach and bool(normal_x @ normal_y <= FOLDED)
+        (edge_x, along_x), (edge_y, along_y) = walked(x, step_x), walked(y, step_y)
+        agree = normals[edge_x] @ normals[edge_y] * (1 if along_x == along_y else -1)
+        return gap(step_x[x], step_y[y]) <= reach and bool(agree <= FOLDED)
 
     partner = np.full(n, -1)
     for a, b in seeds:
