@@ -323,11 +323,11 @@ def stitch(
         following[loop], preceding[loop] = np.roll(loop, -1), np.roll(loop, 1)
     candidates = np.concatenate(loops)
     seeds, shift, support = _seeds(vertices, labels, candidates, distance, cut)
-    if not seeds:
-        return vertices, faces, 0
-    if shift:
+    if shift:  # a shift per two parts with seeds, none without
         vertices = _aligned(vertices, labels, shift, support)
         seeds, shift, _ = _seeds(vertices, labels, candidates, distance, cut)
+    if not seeds:
+        return vertices, faces, 0
 
     def gap(x: int, y: int) -> float:
         """The distance of x and y once y's part is moved back onto x's."""
