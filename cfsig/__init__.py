@@ -30,7 +30,7 @@ _EXPORTS = {
     "compute_many": "batch",
     "Hit": "search.nearest",
     "query": "search.nearest",
-    "partial_file": "search.partial",
+    "partial_file": "descriptors.parts",
     "query_part": "search.partial",
     "evaluate_partial": "evaluation.collections",
     "evaluate_queries": "evaluation.measures",
@@ -75,6 +75,7 @@ __all__ = [
 if TYPE_CHECKING:
     from cfsig.batch import compute_many, index_meshes
     from cfsig.descriptors import layout
+    from cfsig.descriptors.parts import partial_file
     from cfsig.descriptors.signature import Signature, compute_signature, signature_file
     from cfsig.errors import CfsigError
     from cfsig.evaluation.collections import (
@@ -90,7 +91,7 @@ if TYPE_CHECKING:
     from cfsig.index.store import Entry, IndexReader, IndexWriter
     from cfsig.params import Params
     from cfsig.search.nearest import Hit, query
-    from cfsig.search.partial import partial_file, query_part
+    from cfsig.search.partial import query_part
 
     __version__: str
 

@@ -417,10 +417,11 @@ def query(index_file, meshes, k, solver, stage_timeout, as_json, png, partial) -
     """
     import numpy as np
 
+    from cfsig.descriptors.parts import partial_file
     from cfsig.descriptors.signature import signature_file
     from cfsig.index.store import IndexReader
     from cfsig.search.nearest import query
-    from cfsig.search.partial import partial_file, query_part
+    from cfsig.search.partial import query_part
 
     try:
         with IndexReader(index_file) as reader:

@@ -6,8 +6,8 @@ It lives in a module of its own so that spawned worker processes can import it b
 
 import os
 
+from cfsig.descriptors.parts import partial_file
 from cfsig.descriptors.signature import signature_file
-from cfsig.search.partial import partial_file
 
 
 def signature_or_crash(path, params, solver):

@@ -178,7 +178,7 @@ def test_meshes_at_the_bounds_of_scale_are_measured_cleanly(scale):
     # Just inside MAX_COORDINATE and MIN_SPAN: every descriptor (the open cylinder through the
     # repair stage) and partial queries (the cylinder as a part) give finite values without a
     # warning.
-    from cfsig.search.partial import measure_part
+    from cfsig.descriptors.parts import measure_part
 
     sphere, cylinder = icosphere(3), open_cylinder()
     for v, _ in (sphere, cylinder):

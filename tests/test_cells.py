@@ -13,6 +13,7 @@ import pytest
 from cfsig.descriptors import intrinsic, layout
 from cfsig.descriptors.cells import SLOTS, cell_histogram, packed_cells, window_cells
 from cfsig.descriptors.intrinsic import curvature_histograms
+from cfsig.descriptors.parts import FINE_SHARES, Part, measure_part
 from cfsig.descriptors.signature import compute_signature
 from cfsig.errors import IndexFileError
 from cfsig.files.mesh import clean_mesh
@@ -22,9 +23,6 @@ from cfsig.params import Params
 from cfsig.search.cells import UNIT, area_units, cell_scores
 from cfsig.search.partial import (
     FAST_MIN_ROWS,
-    FINE_SHARES,
-    Part,
-    measure_part,
     part_scorer,
     partial_distances,
     query_part,

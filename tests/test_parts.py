@@ -9,6 +9,13 @@ from click.testing import CliRunner
 from cfsig.cli import main
 from cfsig.descriptors import intrinsic as cfhks
 from cfsig.descriptors import layout
+from cfsig.descriptors.parts import (
+    SHARES,
+    curvature_columns,
+    partial_file,
+    partial_vectors,
+    share_curvatures,
+)
 from cfsig.descriptors.signature import compute_signature
 from cfsig.errors import PartialError
 from cfsig.evaluation import collections
@@ -19,14 +26,9 @@ from cfsig.index.store import IndexReader
 from cfsig.params import Params
 from cfsig.search.partial import (
     HISTOGRAM_WEIGHT,
-    SHARES,
-    curvature_columns,
     partial_distances,
-    partial_file,
     partial_scores,
-    partial_vectors,
     query_part,
-    share_curvatures,
     share_queries,
 )
 from tests.crashing import part_or_crash

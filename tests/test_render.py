@@ -103,8 +103,8 @@ def test_culling_back_faces_changes_no_pixel(shape):
     visible = raster._visible_faces(mesh, view[2])
     assert 0.3 * len(mesh.faces) < len(visible) < 0.7 * len(mesh.faces)
     points = raster.screen_coordinates(mesh.vertices, view, (120, 120))
-    all_faces, _ = raster._rasterize(points, mesh.faces, 120, 120)
-    culled, _ = raster._rasterize(points, visible, 120, 120)
+    all_faces, _ = raster.rasterize(points, mesh.faces, 120, 120)
+    culled, _ = raster.rasterize(points, visible, 120, 120)
     assert np.array_equal(culled >= 0, all_faces >= 0)
     drawn = culled >= 0
     assert np.array_equal(visible[culled[drawn]], mesh.faces[all_faces[drawn]])

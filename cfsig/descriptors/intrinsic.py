@@ -14,7 +14,7 @@ there and how its constants were chosen:
 - ``curvature``: the angle defect smoothed by heat diffusion at the `SCALES`
   (`cfsig.operators.curvature`), as joint histograms of adjacent scales near their diagonal
   (`curvature_histograms`): L1 distance per histogram. It is also what partial queries compare
-  (`cfsig.search.partial`), so an index stores its columns on their own (the group
+  (`cfsig.descriptors.parts`), so an index stores its columns on their own (the group
   ``"curvature"``), and with `Params.partial_cells` the fine cells of all the scales jointly
   (`cfsig.descriptors.cells`).
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from cfsig import descriptors
 from cfsig.batch import Progress, compute_many, successes
+from cfsig.descriptors.parts import Part, curvature_columns, partial_file
 from cfsig.errors import MeshError
 from cfsig.evaluation.measures import RetrievalReport, evaluate_distances, evaluate_queries
 from cfsig.files.cla import labels_from_cla
@@ -27,7 +28,7 @@ from cfsig.index.store import IndexReader
 from cfsig.isolate import Limits
 from cfsig.params import Params
 from cfsig.search.nearest import distances as descriptor_distances
-from cfsig.search.partial import Part, curvature_columns, expanded_distances, partial_file
+from cfsig.search.partial import expanded_distances
 
 
 @dataclass(frozen=True)

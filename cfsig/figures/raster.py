@@ -187,7 +187,7 @@ def shade_mesh(
     width, height = (s * _SUPERSAMPLE for s in size)
     points = screen_coordinates(mesh.vertices, view, (width, height))
     faces = _visible_faces(mesh, view[2])
-    face, bary = _rasterize(points, faces, width, height)
+    face, bary = rasterize(points, faces, width, height)
     covered = face >= 0
     corners, bary = faces[face[covered]], bary[covered]
     normals = np.einsum("kj,kjd->kd", bary, (_vertex_normals(mesh) @ view.T)[corners])
@@ -251,10 +251,28 @@ def _visible_faces(mesh: Mesh, toward: np.ndarray) -> np.ndarray:
     return faces[outward * (normals @ toward) > 0]
 
 
-def _rasterize(
+def rasterize(
     points: np.ndarray, faces: np.ndarray, width: int, height: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Z-buffer: the nearest face at each pixel centre (-1 if none) and its barycentrics."""
+    """Z-buffer: the face nearest the viewer at each pixel centre, and where on it.
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+        Vertices in screen coordinates (`screen_coordinates`): column, row, depth towards the
+        viewer, in pixels.
+    faces : (m, 3) int
+        Triangles.
+    width, height : int
+        Image size in pixels.
+
+    Returns
+    -------
+    face : (height * width,) int64
+        The nearest face at each pixel centre, row-major; -1 where none covers it.
+    barycentric : (height * width, 3) float64
+        The pixel centre's barycentric coordinates on that face (zeros where none).
+    """
     face_buf = np.full(width * height, -1, dtype=np.int64)
     depth_buf = np.full(width * height, -np.inf)
     bary_buf = np.zeros((width * height, 3))

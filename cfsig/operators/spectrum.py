@@ -138,6 +138,8 @@ def _lanczos_eigenpairs(
         probe, _ = _largest_inverse(root, known, solve, 1, _CHECK_TOLERANCE, seed)
         if probe[0] <= inverted[-1] * (1 + _CHECK_TOLERANCE):
             break
+        if seed > count:  # each round finds a missed copy: more rounds mean a broken operator
+            raise SolverError("the search for repeated eigenvalues did not settle")
         extra = min(count, len(root) - known.shape[1])
         more, more_vectors = _largest_inverse(root, known, solve, extra, _TOLERANCE, seed)
         order = np.argsort(-np.concatenate([inverted, more]), kind="stable")[:count]
@@ -217,7 +219,8 @@ def lanczos(
     Raises
     ------
     SolverError
-        The operator gave a non-finite vector, or the Ritz pairs did not converge within
+        The operator gave a non-finite vector or a zero or non-finite Ritz value, or the Ritz
+        pairs did not converge within
         ``_STEPS_PER_PAIR * count + _STEPS_MORE`` steps (which bounds the basis's memory).
     """
     cap = min(dimension, _STEPS_PER_PAIR * count + _STEPS_MORE)
@@ -244,7 +247,10 @@ def lanczos(
         if steps == check or invariant:
             theta, s = scipy.linalg.eigh_tridiagonal(alpha[:steps], beta[: steps - 1])
             theta, s = theta[::-1][:count], s[:, ::-1][:, :count]
-            ratio = (b * np.abs(s[-1]) / (tolerance * np.abs(theta))).max()
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = (b * np.abs(s[-1]) / (tolerance * np.abs(theta))).max()
+            if not np.isfinite(ratio):  # a zero or non-finite Ritz value: a singular operator
+                raise SolverError("the Lanczos iteration met a zero or non-finite eigenvalue")
             if steps == dimension or (len(theta) == count and ratio <= 1 and not invariant):
                 return theta, np.dot(basis[:steps].T, s)
             if steps == cap:
@@ -265,7 +271,7 @@ def lanczos(
 def _next_check(last: tuple[int, float] | None, steps: int, ratio: float) -> int:
     """Steps until the residual ratio is predicted to reach 1, from its geometric fall since
     the last check; 10 after the first check."""
-    if last is None or ratio >= last[1]:
+    if last is None or not 0 < ratio < last[1]:
         return 10
     rate = np.log(last[1] / ratio) / (steps - last[0])
     return int(np.clip(np.ceil(np.log(ratio) / rate), 2, 30))

@@ -1,18 +1,10 @@
-"""Partial queries: find the whole shapes that a part of a shape (a cut, a scan) comes from.
+"""Partial queries: rank the whole shapes that a measured part (`cfsig.descriptors.parts`)
+comes from.
 
-The paper names partial matching as the natural extension (section 4). The global channels of
-the ``intrinsic`` descriptor change when a shape is cut, but its curvature at small scales
-(`cfsig.operators.curvature`)
-changes only near the cut: a part's histograms of it are close to those of the whole it was
-cut from, once both are measured at the same scale. That scale is relative to the whole's
-area, which a part does not know, so the part is measured for each share ``f`` of `SHARES`:
-diffusion times ``s * area / f`` and values divided by ``f``, as if its whole had the area
-``area / f``. A whole's partial distance, over those shares, is the smallest sum of two terms
-(`partial_scores`): the share of the part's histograms that the whole's cannot hold (a part is
-a subset of its whole's surface), and their L1 distance. An index built with
-`Params.partial_cells` keeps beside each whole's vector its fine curvature cells
-(`cfsig.descriptors.cells`): a part is then measured at the 13 `FINE_SHARES` and compared by
-its cells instead, every row's read (`cfsig.search.cells`).
+A whole's partial distance, over the shares a part was measured at, is the smallest sum of two
+terms (`partial_scores`): the share of the part's histograms that the whole's cannot hold (a
+part is a subset of its whole's surface), and their L1 distance. With fine cells
+(`Params.partial_cells`) every row's cells are read and scored (`cfsig.search.cells`).
 
 The nearest whole then stands for the part (query expansion): the others are ranked by their
 whole-shape distance to it, so a part finds the relatives of its whole as a whole would.
@@ -21,32 +13,20 @@ whole-shape distance to it, so a part finds the relatives of its whole as a whol
 from __future__ import annotations
 
 import mmap
-import os
 import threading
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
 
-from cfsig.descriptors import intrinsic
-from cfsig.descriptors.cells import cell_histogram
-from cfsig.errors import MeshError, PartialError, SolverError
-from cfsig.files.mesh import Mesh, read_mesh
+from cfsig.descriptors.parts import FINE_SHARES, SHARES, Part, curvature_columns
+from cfsig.errors import PartialError
 from cfsig.index.blocks import Block, map_file, mapped_block, plan_blocks, read_block
 from cfsig.index.store import IndexReader, SegmentView
-from cfsig.operators.conformal import Operators, operators
-from cfsig.operators.curvature import smoothed_curvature
 from cfsig.params import Params
-from cfsig.repair.simplify import simplified_mesh
 from cfsig.search.cells import cell_scores
 from cfsig.search.nearest import Hit, l1_distances, nearest, parallel
 
-SHARES = tuple(2.0 ** (-j / 2) for j in range(7))  # a part's area over its whole's: 1 to 1/8
-# The shares at which a part's fine cells are measured (`Part.cells`): a fine histogram moves by
-# whole cells when the share is off by a factor sqrt(2), so twice as many, a factor 2^(1/4)
-# apart, of which `SHARES` are every other one (studied at commit 35f8114, docs/partial.md).
-FINE_SHARES = tuple(2.0 ** (-j / 4) for j in range(13))
 # The L1 distance's weight beside the unexplained share in `partial_scores`: chosen on SHREC 2007
 # alone, the best mean NN of its three kinds of parts (docs/method.md, "Partial queries").
 HISTOGRAM_WEIGHT = 1.0
@@ -61,171 +41,6 @@ _CellBuffers = tuple[np.ndarray, np.ndarray]
 # A block of fine cells to score: its segment, its blocks of cells and of fractions, and the
 # memory map of the segment's file where they are plain bytes.
 _CellTask = tuple[SegmentView, Block, Block, mmap.mmap | None]
-
-
-@dataclass(frozen=True)
-class Part:
-    """A part measured with an index's parameters, as a partial query compares it.
-
-    Attributes
-    ----------
-    vectors : (len(SHARES), columns) float64 or None
-        `partial_vectors`: the curvature channel at each share, for an index without fine
-        cells; None for one with them.
-    cells : tuple of (cells, fractions), or None
-        For an index with fine cells (`Params.partial_cells`), the part's
-        `cfsig.descriptors.cells.cell_histogram` of all its scales at each share of `FINE_SHARES`:
-        cells
-        (c,) int64 ascending, fractions (c,) float64 summing to 1; None for the others.
-    """
-
-    vectors: np.ndarray | None = None
-    cells: tuple[tuple[np.ndarray, np.ndarray], ...] | None = None
-
-
-def measure_part(mesh: Mesh, params: Params) -> Part:
-    """Measure a part as a partial query against an index of ``params`` compares it.
-
-    Parameters
-    ----------
-    mesh : Mesh
-        The part; its boundary may be open.
-    params : Params
-        The index's parameters.
-
-    Returns
-    -------
-    part : Part
-        Its fine cells at `FINE_SHARES` when ``params`` keep fine cells, else its
-        `partial_vectors`.
-
-    Raises
-    ------
-    PartialError
-        As `curvature_columns`.
-    SolverError
-        A curvature diffusion failed.
-    """
-    curvature_columns(params)
-    if not params.partial_cells:
-        return Part(vectors=partial_vectors(mesh, params))
-    measured = share_curvatures(mesh, params, FINE_SHARES)
-    fine = (intrinsic.FINE_BINS, intrinsic.FINE_BAND)
-    return Part(cells=tuple(cell_histogram(v, a, *fine) for v, a in measured))
-
-
-def curvature_columns(params: Params) -> slice:
-    """The columns of the curvature channel in the signatures that ``params`` make.
-
-    Parameters
-    ----------
-    params : Params
-        Signature parameters.
-
-    Returns
-    -------
-    columns : slice
-        The curvature group of the intrinsic descriptor's layout.
-
-    Raises
-    ------
-    PartialError
-        The descriptor is not ``intrinsic``, the only one with a curvature channel.
-    """
-    if params.descriptor != "intrinsic":
-        raise PartialError(
-            f"partial queries need the curvature channel of the intrinsic descriptor; this "
-            f"index holds {params.descriptor}: build one with 'cfsig index FOLDER -o NEW'"
-        )
-    columns = intrinsic.intrinsic_layout(params).group("curvature")
-    assert columns is not None  # the intrinsic layout has it
-    return columns
-
-
-def partial_vectors(mesh: Mesh, params: Params) -> np.ndarray:
-    """The curvature channel of a part for each share of `SHARES`, weighed as in the index.
-
-    Parameters
-    ----------
-    mesh : Mesh
-        The part; its boundary may be open.
-    params : Params
-        The index's parameters.
-
-    Returns
-    -------
-    vectors : (len(SHARES), columns) float64
-        Comparable by L1 with the `curvature_columns` of the index's signatures.
-
-    Raises
-    ------
-    PartialError
-        As `curvature_columns`.
-    SolverError
-        A curvature diffusion failed.
-    """
-    curvatures = share_curvatures(mesh, params)
-    return np.array(
-        [
-            intrinsic.weigh_curvature(intrinsic.curvature_histograms(values, areas))
-            for values, areas in curvatures
-        ]
-    )
-
-
-def share_curvatures(
-    mesh: Mesh, params: Params, shares: tuple[float, ...] = SHARES
-) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The curvature at scales of a part, measured as if it were each share of its whole.
-
-    For a share ``f``, at the diffusion times ``s * area / f`` of the design's scales ``s``, the
-    values divided by ``f`` (the module's docstring); `partial_vectors` holds their histograms.
-
-    Parameters
-    ----------
-    mesh : Mesh
-        The part; its boundary may be open.
-    params : Params
-        The index's parameters.
-    shares : tuple of float
-        The shares, in (0, 1].
-
-    Returns
-    -------
-    curvatures : list of (values, areas), one per share
-        ``values`` (n, len(scales)) float64, dimensionless, at the vertices of the surface it was
-        measured on (the part, or its simplified copy of ``f * coarse`` faces); ``areas`` (n,)
-        float64, their vertex areas.
-
-    Raises
-    ------
-    PartialError
-        As `curvature_columns`.
-    SolverError
-        A curvature diffusion failed.
-    """
-    curvature_columns(params)
-    # The wholes' curvature is measured on copies of `coarse` faces
-    # (`cfsig.descriptors.intrinsic`): a part
-    # that is a share f of its whole is simplified to f times as many. The part's own operators
-    # serve the shares it has too few faces to simplify for, built once if any.
-    curvatures, whole = [], None
-    for share in shares:
-        copy = simplified_mesh(mesh, round(intrinsic.COARSE * share))
-        if copy is not None:
-            surface = operators(copy)
-        else:
-            if whole is None:
-                whole = operators(mesh, params.mollify)
-            surface = whole
-        curvatures.append(_share_values(surface, share))
-    return curvatures
-
-
-def _share_values(ops: Operators, share: float) -> tuple[np.ndarray, np.ndarray]:
-    """`share_curvatures` of a part's operators for one share."""
-    scales = tuple(s / share for s in intrinsic.SCALES)
-    return smoothed_curvature(ops, scales) / share, ops.vertex_area
 
 
 def query_part(reader: IndexReader, part: Part, k: int = 20) -> tuple[list[Hit], float]:
@@ -322,37 +137,6 @@ def _nearest_by_cells(
         return None
     best, physical = min(found)
     return int(reader.logical_rows(np.array([physical]))[0]), best
-
-
-def partial_file(path: str | os.PathLike, params: Params) -> Part:
-    """Read a part from a file and measure it (`measure_part`).
-
-    The part goes through no repair stage: its cuts and holes are what it is.
-
-    Parameters
-    ----------
-    path : str or path-like
-        An OFF, OBJ, PLY or STL file.
-    params : Params
-        The index's parameters.
-
-    Returns
-    -------
-    part : Part
-
-    Raises
-    ------
-    MeshError
-        The file cannot be read or solved; the message names the file.
-    PartialError
-        As `curvature_columns`.
-    """
-    curvature_columns(params)
-    mesh = read_mesh(path)
-    try:
-        return measure_part(mesh, params)
-    except SolverError as exc:
-        raise MeshError(f"{path}: {exc}") from None
 
 
 def partial_distances(
