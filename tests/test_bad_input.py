@@ -197,3 +197,20 @@ def test_meshes_at_the_bounds_of_scale_are_measured_cleanly(scale):
             measured = measure_part(part, Params(partial_cells=cells))
             values = measured.vectors if measured.cells is None else measured.cells[0][1]
             assert np.isfinite(values).all()
+
+
+@pytest.mark.parametrize("descriptor", ["intrinsic", "cf", "gps", "rigid"])
+def test_a_stray_far_vertex_gives_a_signature_or_one_line(tmp_path, descriptor):
+    # One vertex of a unit sphere thrown a million radii away, as a bit flip in a file does:
+    # the spectrum's iterations once ended in a traceback on it.
+    v, f = icosphere(2)
+    v[np.argmin(np.abs(v[:, 0] - 0.16)), 0] = 220356.0
+    path = tmp_path / "stray.off"
+    path.write_text(off_text(v, f))
+    result = _compute(path, "--descriptor", descriptor)
+    assert "Traceback" not in result.output and not isinstance(result.exception, ValueError)
+    errors = [line for line in result.output.splitlines() if line.startswith("Error:")]
+    if result.exit_code == 0:
+        assert not errors and "nan" not in result.output.lower()
+    else:
+        assert result.exit_code == 1 and len(errors) == 1 and str(path) in errors[0]
