@@ -19,12 +19,14 @@ per kind and amount, each from ``np.random.default_rng(i)``:
 - ``scan-N``: what a depth sensor sees from one random direction: a 128 x 128 depth image of the
   surface, triangulated pixel by pixel where neighbouring depths agree, with Gaussian noise of N%
   of the bounding-box diagonal along the view;
-- ``noise-N``: the whole shape with Gaussian noise of N% of the diagonal on every vertex.
+- ``noise-N``: the whole shape with Gaussian noise of N% of the diagonal on every vertex;
+- ``shot-R`` (copies of every mesh only): 0.1% of the vertices thrown R% of the diagonal.
 
 Cuts and holes are re-tessellated (`retessellate`: split, slid along the surface and simplified
 to about 60% of the faces), so that no part shares a triangle with any indexed mesh; a scan is a
 new tessellation by construction. Parts are ranked by `cfsig.evaluate_partial` as ``cfsig query
---partial`` ranks them; noisy wholes as whole shapes (``cfsig query``).
+--partial`` ranks them, against an index of ``Params()`` (by the curvature columns) and one of
+``Params(partial_cells=True)`` (by fine cells); noisy wholes as whole shapes (``cfsig query``).
 
 Near-duplicate search, the protocol where each query's own whole is in the index, is one line
 per kind at its middle amount: the same kinds made from the indexed meshes. For noise it is the
@@ -63,6 +65,8 @@ AMOUNTS = {
     "scan": (0.001, 0.0025, 0.005),
     "noise": (0.0025, 0.005, 0.01),
 }
+RANKINGS = {"curvature columns": cfsig.Params(), "fine cells": cfsig.Params(partial_cells=True)}
+SHOT = 0.1  # how far, over the diagonal, shot noise throws 0.1% of the vertices
 MEASURES = ("NN", "FT", "mAP")
 SCAN_PIXELS = 128
 RETESSELLATED = 0.6  # faces of a re-tessellated part over its own
@@ -179,7 +183,18 @@ def retessellate(
     return decimate(vertices + step * reach[:, None], split, round(RETESSELLATED * len(faces)))
 
 
-MAKERS = {"cut": cut, "holes": holes, "scan": scan, "noise": noisy}
+def shot(mesh: Mesh, reach: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """The whole mesh with 0.1% of its vertices (at least one) each thrown ``reach`` times the
+    diagonal in a random direction, as a scanner's outliers are."""
+    vertices = mesh.vertices.copy()
+    thrown = rng.choice(len(vertices), max(1, round(0.001 * len(vertices))), replace=False)
+    away = rng.normal(size=(len(thrown), 3))
+    away *= reach * diagonal(vertices) / np.linalg.norm(away, axis=1)[:, None]
+    vertices[thrown] += away
+    return vertices, mesh.faces
+
+
+MAKERS = {"cut": cut, "holes": holes, "scan": scan, "noise": noisy, "shot": shot}
 
 
 def query_mesh(mesh: Mesh, kind: str, amount: float, rng: np.random.Generator) -> Mesh:
@@ -266,13 +281,15 @@ def whole_queries(index: Path, folder: Path, jobs: int) -> cfsig.RetrievalReport
     return evaluate_queries(distances, found.labels, labels)
 
 
-def noise_duplicates(paths: list[Path], amount: float, tmp: Path, jobs: int) -> list[str]:
+def noise_duplicates(
+    paths: list[Path], kind: str, amount: float, tmp: Path, jobs: int
+) -> list[str]:
     """Rank 1 of each noisy copy's own original among the clean meshes, and the first tier of
     the noisy copies, leave-one-out, beside the clean meshes' own."""
-    clean_folder, noisy_folder = tmp / "clean", tmp / kind_name("noise", amount)
+    clean_folder, noisy_folder = tmp / "clean", tmp / kind_name(kind, amount)
     if not clean_folder.exists():
         link(paths, clean_folder)
-    make_queries(paths, tmp, (("noise", amount),), jobs)
+    make_queries(paths, tmp, ((kind, amount),), jobs)
     params = cfsig.Params()
     clean, _ = cfsig.compute_collection(clean_folder, params, jobs=jobs)
     copies, _ = cfsig.compute_collection(noisy_folder, params, jobs=jobs)
@@ -299,12 +316,13 @@ def collection_rows(
     with tempfile.TemporaryDirectory(prefix=f"cfsig-world-{name}-") as folder:
         tmp = Path(folder)
         link(indexed, tmp / "wholes")
-        index = tmp / "index"
-        params = cfsig.Params()
-        with cfsig.IndexWriter(index, params, cfsig.layout(params)) as writer:
-            _, failures = cfsig.index_meshes(writer, [tmp / "wholes"], jobs=jobs)
-        for line in failures:
-            print(line, file=sys.stderr)
+        indexes = {}
+        for ranked, params in RANKINGS.items():
+            indexes[ranked] = tmp / f"index-{params.partial_cells}"
+            with cfsig.IndexWriter(indexes[ranked], params, cfsig.layout(params)) as writer:
+                _, failures = cfsig.index_meshes(writer, [tmp / "wholes"], jobs=jobs)
+            for line in failures:
+                print(line, file=sys.stderr)
         for rows, paths, asked, parts in (
             (out, queried, kinds, tmp / "queries"),
             (duplicate, indexed, middle, tmp / "duplicates"),
@@ -312,21 +330,22 @@ def collection_rows(
             make_queries(paths, parts, asked, jobs)
             for kind, amount in asked:
                 found = parts / kind_name(kind, amount)
-                if kind == "noise":
-                    report = whole_queries(index, found, jobs)
-                else:
-                    report, failures = cfsig.evaluate_partial(index, found, jobs)
-                    for line in failures:
-                        print(line, file=sys.stderr)
-                measures = [f"{report.measures[m]:.3f}" for m in MEASURES]
-                rows.append([name, kind_name(kind, amount), report.count, *measures])
+                for ranked, index in indexes.items():
+                    if kind == "noise":  # a whole shape, ranked by its vector alone
+                        ranked = "whole shape"
+                        report = whole_queries(index, found, jobs)
+                    else:
+                        report, failures = cfsig.evaluate_partial(index, found, jobs)
+                        for line in failures:
+                            print(line, file=sys.stderr)
+                    measures = [f"{report.measures[m]:.3f}" for m in MEASURES]
+                    rows.append([name, kind_name(kind, amount), ranked, report.count, *measures])
+                    if kind == "noise":
+                        break
+        everything = sorted(indexed + queried)
         copies = [
-            [
-                name,
-                kind_name("noise", amount),
-                *noise_duplicates(indexed + queried, amount, tmp, jobs),
-            ]
-            for amount in AMOUNTS["noise"]
+            [name, kind_name(kind, amount), *noise_duplicates(everything, kind, amount, tmp, jobs)]
+            for kind, amount in [("noise", a) for a in AMOUNTS["noise"]] + [("shot", SHOT)]
         ]
     return out, duplicate, copies
 
@@ -347,7 +366,7 @@ def main() -> None:
         rows = collection_rows(name, args.data_root / name, args.every, args.jobs)
         out, duplicate, copies = out + rows[0], duplicate + rows[1], copies + rows[2]
         print(f"{name}: measured", file=sys.stderr, flush=True)
-    head = ["collection", "queries", "count", *MEASURES]
+    head = ["collection", "queries", "ranked by", "count", *MEASURES]
     text = "\n".join(
         [
             f"Measured by `{command('world.py')}`.",

@@ -46,16 +46,32 @@ def test_results(data, tmp_path):
     args = ["--data-root", data, "--collections", "shrec07", "--jobs", 1, "--every", 2]
     out = run("results.py", *args, "--doc", doc)
     assert "| collection | descriptor | queries | NN | FT | ST | DCG | mAP | s per mesh |" in out
-    # torus-1 alone in its class is not a query of the whole shapes, but its parts are
+    # torus-1 alone in its class is not a query
     assert re.search(rf"\| shrec07 \| `cf` \| 2 \|( {NUMBER} \|){{6}}", out)
     assert re.search(rf"\| shrec07 \| `intrinsic` \| 2 \|( {NUMBER} \|){{6}}", out)
-    assert "| collection | parts | ranked by | queries | NN | FT | mAP |" in out
-    for kind in ("cut", "holes", "scan"):
-        for ranked in ("curvature columns", "fine cells"):
-            assert re.search(rf"\| shrec07 \| {kind} \| {ranked} \| 3 \|( {NUMBER} \|){{3}}", out)
     text = doc.read_text()
     assert text.startswith(f"# Results\n\nKept.\n\n{marker}\n\nMeasured by `python benchmarks/")
-    assert "replaced" not in text and text.count("| shrec07 |") == 8
+    assert "replaced" not in text and text.count("| shrec07 |") == 2
+
+
+def test_world(data, tmp_path):
+    doc = tmp_path / "results.md"
+    doc.write_text(
+        "# Results\n\n<!-- benchmarks/world.py -->\nold\n<!-- /benchmarks/world.py -->\n"
+    )
+    args = ["--data-root", data, "--collections", "shrec07", "--jobs", 1]
+    out = run("world.py", *args, "--doc", doc)
+    # two classes of three: meshes 0 and 2 of each indexed, mesh 1 of each queried
+    for kind in ("cut-30", "cut-50", "cut-70", "holes-25", "scan-0.25"):
+        for ranked in ("curvature columns", "fine cells"):
+            assert re.search(rf"\| shrec07 \| {kind} \| {ranked} \| 2 \|( {NUMBER} \|){{3}}", out)
+    assert re.search(rf"\| shrec07 \| noise-1 \| whole shape \| 2 \|( {NUMBER} \|){{3}}", out)
+    for kind in ("cut-50", "holes-25", "scan-0.25"):  # near-duplicate: 4 queries
+        assert re.search(rf"\| shrec07 \| {kind} \| fine cells \| 4 \|( {NUMBER} \|){{3}}", out)
+    for kind in ("noise-0.25", "noise-0.5", "noise-1", "shot-10"):  # copies of all six
+        assert re.search(rf"\| shrec07 \| {kind} \| {NUMBER} \|( {NUMBER} \|){{2}}", out), kind
+    text = doc.read_text()
+    assert "old" not in text and text.endswith("<!-- /benchmarks/world.py -->\n")
 
 
 def test_partial_speed(tmp_path):
