@@ -25,6 +25,7 @@ bench: $(BIN)/python
 	@test -n "$(DATA)" || { echo "usage: make bench DATA=FOLDER"; exit 2; }
 	$(BIN)/pip install -q -e '.[cholmod,fast]'
 	$(BIN)/python benchmarks/results.py --data-root $(DATA) --doc docs/results.md
+	$(BIN)/python benchmarks/world.py --data-root $(DATA) --doc docs/results.md
 
 # The per-mesh, index and partial query figures of docs/performance.md; the indexes go in SCRATCH.
 SCRATCH ?= ../cfsig-bench
