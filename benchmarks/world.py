@@ -1,7 +1,8 @@
 """Queries from the world: parts, scans and noisy copies of shapes whose own file is not indexed.
 
     python benchmarks/world.py --data-root DATA [--doc docs/results.md]
-        [--collections shrec07,mcgill,faust] [--jobs N] [--every K]
+        [--collections shrec07,mcgill,faust] [--kinds cut,holes,scan,noise] [--jobs N]
+        [--every K]
 
 ``DATA/NAME/<class>/<file>.off`` holds each collection (``../shared/data/unpack all DATA``);
 ``--every K`` keeps every k-th mesh of each half (a quick look).
@@ -306,12 +307,14 @@ def noise_duplicates(
 
 
 def collection_rows(
-    name: str, data: Path, every: int, jobs: int
+    name: str, data: Path, every: int, jobs: int, chosen: list[str]
 ) -> tuple[list[list], list[list], list[list]]:
-    """The tables' rows of one collection: own wholes out, near-duplicate, noise copies."""
+    """The tables' rows of one collection, for the kinds chosen: own wholes out,
+    near-duplicate, noise copies."""
     indexed, queried = halves(data, every)
-    kinds = tuple((kind, amount) for kind, amounts in AMOUNTS.items() for amount in amounts)
-    middle = tuple((kind, amounts[1]) for kind, amounts in AMOUNTS.items())
+    amounts = {kind: AMOUNTS[kind] for kind in chosen}
+    kinds = tuple((kind, amount) for kind, values in amounts.items() for amount in values)
+    middle = tuple((kind, values[1]) for kind, values in amounts.items())
     out, duplicate = [], []
     with tempfile.TemporaryDirectory(prefix=f"cfsig-world-{name}-") as folder:
         tmp = Path(folder)
@@ -345,7 +348,7 @@ def collection_rows(
         everything = sorted(indexed + queried)
         copies = [
             [name, kind_name(kind, amount), *noise_duplicates(everything, kind, amount, tmp, jobs)]
-            for kind, amount in [("noise", a) for a in AMOUNTS["noise"]] + [("shot", SHOT)]
+            for kind, amount in [("noise", a) for a in amounts.get("noise", ())] + [("shot", SHOT)]
         ]
     return out, duplicate, copies
 
@@ -358,12 +361,16 @@ def main() -> None:
     parser.add_argument("--collections", default=",".join(COLLECTIONS), help="comma-separated")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes")
     parser.add_argument("--every", type=int, default=1, help="every k-th mesh of each half")
+    parser.add_argument("--kinds", default=",".join(AMOUNTS), help="comma-separated")
     args = parser.parse_args()
+    kinds = args.kinds.split(",")
+    if not set(kinds) <= set(AMOUNTS):
+        sys.exit(f"--kinds: choose from {','.join(AMOUNTS)}")
     if args.doc is not None and not all(s in args.doc.read_text() for s in SECTION):
         sys.exit(f"{args.doc}: no section {SECTION[0]} ... {SECTION[1]}")
     out, duplicate, copies = [], [], []
     for name in args.collections.split(","):
-        rows = collection_rows(name, args.data_root / name, args.every, args.jobs)
+        rows = collection_rows(name, args.data_root / name, args.every, args.jobs, kinds)
         out, duplicate, copies = out + rows[0], duplicate + rows[1], copies + rows[2]
         print(f"{name}: measured", file=sys.stderr, flush=True)
     head = ["collection", "queries", "ranked by", "count", *MEASURES]
