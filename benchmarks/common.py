@@ -25,6 +25,18 @@ def arguments(description: str) -> argparse.ArgumentParser:
     return parser
 
 
+def collection_parser(description: str, collections: tuple[str, ...]) -> argparse.ArgumentParser:
+    """A parser of ``--data-root`` (``DATA/NAME/<class>/<file>``), ``--doc``, ``--collections``,
+    ``--jobs`` and ``--every``, for the scripts that measure whole collections."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--data-root", type=Path, required=True, help="DATA/NAME/<class>/<file>")
+    parser.add_argument("--doc", type=Path, help="write the tables into this file")
+    parser.add_argument("--collections", default=",".join(collections), help="comma-separated")
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes")
+    parser.add_argument("--every", type=int, default=1, help="every k-th mesh (a quick look)")
+    return parser
+
+
 def save_rows(path: Path | None, rows: list[dict]) -> None:
     """Write the measurements as JSON when ``--json`` was given."""
     if path is not None:

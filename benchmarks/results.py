@@ -22,12 +22,11 @@ by the tables, preceded by a line naming the command.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import tempfile
 from pathlib import Path
 
-from common import command, table
+from common import collection_parser, command, table
 
 import cfsig
 
@@ -74,13 +73,7 @@ def whole_rows(name: str, folder: Path, data_root: Path, jobs: int) -> list[list
 
 def main() -> None:
     """Measure every collection asked for, print the tables and write them into ``--doc``."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data-root", type=Path, required=True, help="DATA/NAME/<class>/<file>")
-    parser.add_argument("--doc", type=Path, help="write the tables after the marker of this file")
-    parser.add_argument("--collections", default=",".join(COLLECTIONS), help="comma-separated")
-    parser.add_argument("--jobs", type=int, default=2, help="worker processes")
-    parser.add_argument("--every", type=int, default=1, help="every k-th mesh (a quick look)")
-    args = parser.parse_args()
+    args = collection_parser(__doc__.splitlines()[0], COLLECTIONS).parse_args()
     if args.doc is not None and MARKER not in args.doc.read_text():
         sys.exit(f"{args.doc}: no line {MARKER}")
     whole = []

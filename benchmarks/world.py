@@ -40,7 +40,6 @@ With ``--doc``, the section between ``<!-- benchmarks/world.py -->`` and
 
 from __future__ import annotations
 
-import argparse
 import multiprocessing
 import sys
 import tempfile
@@ -49,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
-from common import command, table
+from common import collection_parser, command, table
 from scipy.sparse.csgraph import dijkstra
 
 import cfsig
@@ -355,12 +354,7 @@ def collection_rows(
 
 def main() -> None:
     """Measure every collection asked for, print the tables and write them into ``--doc``."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data-root", type=Path, required=True, help="DATA/NAME/<class>/<file>")
-    parser.add_argument("--doc", type=Path, help="replace this file's section of the tables")
-    parser.add_argument("--collections", default=",".join(COLLECTIONS), help="comma-separated")
-    parser.add_argument("--jobs", type=int, default=2, help="worker processes")
-    parser.add_argument("--every", type=int, default=1, help="every k-th mesh of each half")
+    parser = collection_parser(__doc__.splitlines()[0], COLLECTIONS)
     parser.add_argument("--kinds", default=",".join(AMOUNTS), help="comma-separated")
     args = parser.parse_args()
     kinds = args.kinds.split(",")
