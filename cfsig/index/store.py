@@ -35,7 +35,7 @@ from typing import IO, NoReturn, Protocol
 import h5py
 import numpy as np
 
-from cfsig import __version__
+from cfsig import __version__, descriptors
 from cfsig.errors import IndexFileError
 from cfsig.index.segments import (
     CELLS,
@@ -1057,9 +1057,16 @@ def _check_header(f: h5py.File, path: Path) -> tuple[Params, Layout]:
     if version < FORMAT_VERSION:
         raise IndexFileError(f"{path}: {_made_by(f.attrs.get('params'))}; {REBUILD}")
     try:
-        return Params.from_json(f.attrs["params"]), Layout.from_json(f.attrs["layout"])
+        params, layout = Params.from_json(f.attrs["params"]), Layout.from_json(f.attrs["layout"])
+        current = descriptors.layout(params)
     except (KeyError, TypeError, ValueError) as exc:
         raise IndexFileError(f"{path}: unreadable parameters ({exc})") from None
+    if layout != current:
+        raise IndexFileError(
+            f"{path}: made by an earlier {params.descriptor} descriptor ({layout.length} "
+            f"entries a row, now {current.length}); {REBUILD}"
+        )
+    return params, layout
 
 
 def _not_a_folder(path: Path) -> NoReturn:
