@@ -1,7 +1,8 @@
 """The descriptor ``rigid`` (cfsig.descriptors.rigid): the channels of ``intrinsic``, the
 panorama and ``lf`` weighed together, and the search by its own distance."""
 
-import h5py
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -10,9 +11,8 @@ from cfsig import descriptors
 from cfsig.cli import main
 from cfsig.descriptors import intrinsic, lf, panorama, rigid, sh
 from cfsig.descriptors.signature import compute_signature
-from cfsig.errors import IndexFileError
 from cfsig.files.mesh import clean_mesh
-from cfsig.index.store import IndexReader, IndexWriter
+from cfsig.index.store import read_manifest, write_manifest
 from cfsig.params import Layout, Params
 from cfsig.repair.stage import repair_mesh
 from cfsig.search.l1 import l1_numpy
@@ -169,12 +169,19 @@ def test_signature_goes_through_the_repair_stage():
 
 def test_an_index_of_an_earlier_rigid_is_refused(tmp_path):
     """An index whose rows another version of the descriptor made (``rigid`` kept 2,661
-    entries a row before the panorama) is refused in one line that says how to rebuild it."""
-    path = tmp_path / "index"
-    with IndexWriter(path, RIGID, descriptors.layout(RIGID)):
-        pass
-    with h5py.File(path / "manifest.h5", "a") as f:
-        f.attrs["layout"] = Layout(2661).to_json()
-    for open_index in (IndexReader, lambda p: IndexWriter(p, RIGID)):
-        with pytest.raises(IndexFileError, match="earlier rigid descriptor.*rebuild it"):
-            open_index(path)
+    entries a row before the panorama) is refused in one line that says how to rebuild it, by
+    a query, an evaluation and a writer alike."""
+    two_classes(tmp_path / "data")
+    index = tmp_path / "index"
+    runner = CliRunner()
+    args = ["index", str(tmp_path / "data"), "-o", str(index), "--descriptor", "rigid"]
+    assert runner.invoke(main, args).exit_code == 0
+    write_manifest(index, replace(read_manifest(index), layout=Layout(2661)))
+    for command in (
+        ["query", str(index), str(tmp_path / "data/long/a.off")],
+        ["evaluate", "--index", str(index)],
+        args,
+    ):
+        out = runner.invoke(main, command)
+        assert out.exit_code != 0 and "rebuild it: cfsig index" in out.output, out.output
+        assert "Traceback" not in out.output

@@ -184,9 +184,8 @@ def panorama_distances(queries: np.ndarray, rows: np.ndarray, l1: L1Kernel) -> n
         Features (`panorama_features`).
     rows : (m, LENGTH) float32, C-contiguous
         Features to compare with.
-    l1 : callable
-        ``l1(a, b, out)`` fills ``out[i, j]`` with the L1 distance of rows ``a[i]`` and
-        ``b[j]`` (`cfsig.search.l1`).
+    l1 : L1Kernel
+        The L1 distances of rows (`cfsig.descriptors.base.L1Kernel`).
 
     Returns
     -------

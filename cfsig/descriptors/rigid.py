@@ -116,13 +116,10 @@ def channel_distances(
 
     Parameters
     ----------
-    queries : (q, LENGTH) float32, C-contiguous
-        Signatures (`rigid_vector`).
-    rows : (m, LENGTH) float32, C-contiguous
-        Signatures to compare with.
-    l1 : callable
-        ``l1(a, b, out)`` fills ``out[i, j]`` with the L1 distance of rows ``a[i]`` and
-        ``b[j]`` (`cfsig.search.l1`).
+    queries, rows : (q, LENGTH) and (m, LENGTH) float32, C-contiguous
+        Signatures (`rigid_vector`) to compare.
+    l1 : L1Kernel
+        The L1 distances of rows (`cfsig.descriptors.base.L1Kernel`).
     bound : bool
         Put the light field distance's lower bound (`lf.lf_bounds`) in its place.
 

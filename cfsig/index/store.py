@@ -35,7 +35,7 @@ from typing import IO, NoReturn, Protocol
 import h5py
 import numpy as np
 
-from cfsig import __version__, descriptors
+from cfsig import __version__
 from cfsig.errors import IndexFileError
 from cfsig.index.segments import (
     CELLS,
@@ -461,7 +461,7 @@ class IndexWriter:
                         f"({self._manifest.params.to_json()})"
                     )
                 if layout is not None and layout != self._manifest.layout:
-                    raise IndexFileError(f"{self.path}: built with another layout")
+                    raise IndexFileError(f"{self.path}: built with another layout; {REBUILD}")
                 self._remove_orphans()
             elif layout is None:
                 raise ValueError(f"{self.path}: a new index needs its descriptor's layout")
@@ -1057,16 +1057,9 @@ def _check_header(f: h5py.File, path: Path) -> tuple[Params, Layout]:
     if version < FORMAT_VERSION:
         raise IndexFileError(f"{path}: {_made_by(f.attrs.get('params'))}; {REBUILD}")
     try:
-        params, layout = Params.from_json(f.attrs["params"]), Layout.from_json(f.attrs["layout"])
-        current = descriptors.layout(params)
+        return Params.from_json(f.attrs["params"]), Layout.from_json(f.attrs["layout"])
     except (KeyError, TypeError, ValueError) as exc:
         raise IndexFileError(f"{path}: unreadable parameters ({exc})") from None
-    if layout != current:
-        raise IndexFileError(
-            f"{path}: made by an earlier {params.descriptor} descriptor ({layout.length} "
-            f"entries a row, now {current.length}); {REBUILD}"
-        )
-    return params, layout
 
 
 def _not_a_folder(path: Path) -> NoReturn:
