@@ -6,7 +6,9 @@
 For each descriptor, the signatures of every mesh ``DATA/<class>/<file>``
 (`cfsig.compute_collection`), ranked leave-one-out on the meshes that every descriptor could
 compute (`cfsig.evaluate_collections`; the classes are the folders, or ``--cla``'s). Prints the
-measures of each descriptor and the first tier per class drawn, as Markdown, and writes into
+measures of each descriptor (with ``rigid``, also each of its channels alone, ranked by the
+channel's own distance on ``rigid``'s vectors) and the first tier per class drawn, as Markdown,
+and writes into
 OUT the pictures of `cfsig.figures.report.write_comparison` for the classes drawn (default: all):
 ``precision_recall.png``, the curves of all queries and of each class, a curve per descriptor,
 and per class ``query_<number>_<class>.png``, its first model's nearest, a row per descriptor.
@@ -18,12 +20,25 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import numpy as np
 from common import command, table
 
 import cfsig
+from cfsig.descriptors import rigid
+from cfsig.evaluation.collections import Evaluation
 from cfsig.figures.report import write_comparison
+from cfsig.search.l1 import fast_kernel, l1_numpy
 
 MEASURES = ("NN", "FT", "ST", "DCG", "mAP")
+
+
+def channel_reports(evaluation: Evaluation) -> dict[str, cfsig.RetrievalReport]:
+    """Each channel of ``rigid`` alone: its own distance (`rigid.channel_distances`) between the
+    ``rigid`` vectors evaluated, ranked leave-one-out."""
+    signatures = np.ascontiguousarray(evaluation.collection.signatures, np.float32)
+    channels = rigid.channel_distances(signatures, signatures, fast_kernel() or l1_numpy)
+    labels = evaluation.collection.labels
+    return {name: cfsig.evaluate_distances(d, labels) for name, d in channels.items()}
 
 
 def main() -> None:
@@ -52,6 +67,12 @@ def main() -> None:
         [f"`{name}`", *(f"{r.report.measures[m]:.3f}" for m in MEASURES), r.seconds_per_mesh]
         for name, r in results.items()
     ]
+    if "rigid" in results:
+        at = list(results).index("rigid")
+        rows[at:at] = [
+            [f"`rigid`'s {name} alone", *(f"{report.measures[m]:.3f}" for m in MEASURES), ""]
+            for name, report in channel_reports(results["rigid"]).items()
+        ]
     print(table(["descriptor", *MEASURES, "s per mesh"], rows), end="\n\n", flush=True)
     per_class = [
         [cls, *(f"{r.report.per_class[cls]['FT']:.3f}" for r in results.values())] for cls in drawn

@@ -1,7 +1,7 @@
 """Seconds per mesh of each descriptor, end to end, against the default's in the same run.
 
     python benchmarks/per_mesh.py --data FOLDER [--every K] [--descriptors cf,intrinsic,...]
-        [--repeat N]
+        [--repeat N] [--channels]
 
 For the meshes ``FOLDER/<class>/<file>.off`` (every k-th in sorted order) and each descriptor
 in turn (default: all):
@@ -13,7 +13,9 @@ in turn (default: all):
   meshes into a new index, one job, interpreter start included, in wall seconds per mesh: the
   median of ``--repeat`` runs.
 
-Each with its ratio to the default ``intrinsic``'s in the same run.
+Each with its ratio to the default ``intrinsic``'s in the same run. With ``--channels``, only
+``rigid``'s stages, in this process: reading and repair, then each channel on the repaired mesh,
+wall seconds, medians over the meshes.
 """
 
 from __future__ import annotations
@@ -35,7 +37,8 @@ from pathlib import Path
 from common import data_arguments, median, meshes, table
 
 import cfsig
-from cfsig.descriptors import NAMES
+from cfsig.descriptors import NAMES, intrinsic, lf, panorama, rigid, sh
+from cfsig.repair.stage import repair_mesh
 
 DEFAULT = cfsig.Params().descriptor
 
@@ -45,6 +48,26 @@ def timed(path, params: cfsig.Params) -> tuple[float, float]:
     cpu, wall = time.process_time(), time.perf_counter()
     cfsig.signature_file(path, params)
     return time.process_time() - cpu, time.perf_counter() - wall
+
+
+def channel_seconds(path: Path) -> dict[str, float]:
+    """Wall seconds of each stage of ``rigid`` on one mesh (`rigid.rigid_vector`'s parts)."""
+    params = cfsig.Params(descriptor="rigid")
+    start = time.perf_counter()
+    mesh = repair_mesh(cfsig.read_mesh(path), params.repair)
+    seconds = {"reading and repair": time.perf_counter() - start}
+    stages = {
+        "heat and curvature": lambda: intrinsic.intrinsic_vector(mesh, params, None, "auto"),
+        "panorama": lambda: panorama.panorama_features(
+            *sh.surface_samples(mesh.vertices, mesh.faces, params.seed)
+        ),
+        f"lf ({rigid.FIELDS} light fields)": lambda: lf.light_field_features(mesh, rigid.FIELDS),
+    }
+    for name, stage in stages.items():
+        start = time.perf_counter()
+        stage()
+        seconds[name] = time.perf_counter() - start
+    return seconds
 
 
 def whole_run(folder: Path, descriptor: str, index: Path) -> float:
@@ -72,8 +95,17 @@ def main() -> None:
     data_arguments(parser)
     parser.add_argument("--descriptors", default=",".join(NAMES), help="comma-separated")
     parser.add_argument("--repeat", type=int, default=3, help="whole runs per descriptor")
+    parser.add_argument("--channels", action="store_true", help="time rigid's stages only")
     args = parser.parse_args()
     files = meshes(args.data, args.every)
+    if args.channels:
+        channel_seconds(files[0])
+        stages = [channel_seconds(path) for path in files]
+        rows = [[f"{name}", f"{median([s[name] for s in stages]):.4f}"] for name in stages[0]]
+        rows.append(["all", f"{median([sum(s.values()) for s in stages]):.4f}"])
+        print(f"{len(files)} meshes from {args.data}; `rigid`'s stages, medians, seconds:\n")
+        print(table(["stage", "wall"], rows))
+        return
     names = list(dict.fromkeys([DEFAULT, *args.descriptors.split(",")]))
     params = {d: cfsig.Params(descriptor=d) for d in names}
     for p in params.values():

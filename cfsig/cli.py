@@ -56,8 +56,8 @@ _descriptor_option = click.option(
     help="What to compute: the spectrum, heat kernel signatures and curvature at scales "
     "(intrinsic); the paper's histogram of the conformal factor (cf); the peers it compares "
     "with: spherical harmonics (sh), the global point signature (gps), the light field (lf); "
-    "or, for rigid objects, intrinsic, sh and lf weighed together (rigid) [intrinsic, or an "
-    "existing index's own].",
+    "or, for rigid objects, intrinsic, panoramas and lf weighed together (rigid) [intrinsic, or "
+    "an existing index's own].",
 )
 _solver_option = click.option(
     "--solver",

@@ -24,9 +24,9 @@ class Params:
         default (the spectrum, heat kernel signatures and curvature at scales); ``"cf"``, the
         paper's histogram of phi; ``"sh"``, ``"gps"`` and ``"lf"``, the spherical harmonic
         descriptor, the global point signature and the light field descriptor the paper compares
-        with; ``"rigid"``, for rigid objects: ``intrinsic``'s channels, ``sh`` and ``lf``'s
-        silhouettes weighed together. ``bins`` to ``normalize`` apply to ``cf`` only, ``seed``
-        also to ``sh``, ``gps`` and ``rigid``.
+        with; ``"rigid"``, for rigid objects: ``intrinsic``'s channels, panoramic projections and
+        ``lf``'s silhouettes weighed together. ``bins`` to ``normalize`` apply to ``cf`` only,
+        ``seed`` also to ``sh``, ``gps`` and ``rigid``.
     bins : int
         Number of histogram bins (paper section 2.3: 200).
     low, high : float

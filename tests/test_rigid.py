@@ -1,5 +1,7 @@
-"""The descriptor ``rigid`` (cfsig.descriptors.rigid): the channels of ``intrinsic``, ``sh`` and
-``lf`` weighed together, and the search by its own distance."""
+"""The descriptor ``rigid`` (cfsig.descriptors.rigid): the channels of ``intrinsic``, the
+panorama and ``lf`` weighed together, and the search by its own distance."""
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -7,10 +9,11 @@ from click.testing import CliRunner
 
 from cfsig import descriptors
 from cfsig.cli import main
-from cfsig.descriptors import intrinsic, lf, rigid
+from cfsig.descriptors import intrinsic, lf, panorama, rigid, sh
 from cfsig.descriptors.signature import compute_signature
 from cfsig.files.mesh import clean_mesh
-from cfsig.params import Params
+from cfsig.index.store import read_manifest, write_manifest
+from cfsig.params import Layout, Params
 from cfsig.repair.stage import repair_mesh
 from cfsig.search.l1 import l1_numpy
 from tests.helpers import (
@@ -22,7 +25,8 @@ from tests.helpers import (
 )
 
 RIGID = Params(descriptor="rigid")
-TAIL = rigid.LENGTH - rigid.HEAD  # the light field features
+FLOATS = rigid.LIGHTS.start  # the entries before the light field features, which are whole
+TAIL = rigid.LENGTH - FLOATS
 
 
 def _vector(v, f):
@@ -42,23 +46,27 @@ def _nearest_other(vectors, name):
     return min(_distance(vectors[name], vectors[o]) for o in vectors if o != name)
 
 
-def test_the_distance_weighs_the_channels_of_the_three_descriptors():
+def test_the_distance_weighs_the_channels():
     """The distance of two meshes sums over the four channels each one's distance, as its own
-    descriptor measures it (``lf``'s on the first light fields), over its median, to the power,
+    module measures it (``lf``'s on the first light fields), over its median, to the power,
     times its weight."""
     meshes = [clean_mesh(*make()) for make in (SHAPES["limbs3"], SHAPES["capsule"])]
     parts = {
-        name: [descriptors.get(name).compute(m, Params(descriptor=name), None, "auto").vector
-               for m in meshes]
-        for name in ("intrinsic", "sh")
-    }  # fmt: skip
-    parts["lf"] = [lf.light_field_features(m, rigid.FIELDS) for m in meshes]
+        "intrinsic": [intrinsic.intrinsic_vector(m, RIGID, None, "auto").vector for m in meshes],
+        "panorama": [
+            panorama.panorama_features(*sh.surface_samples(m.vertices, m.faces, RIGID.seed))
+            for m in meshes
+        ],
+        "lf": [lf.light_field_features(m, rigid.FIELDS) for m in meshes],
+    }
     cut = (intrinsic.EIGENPAIRS, intrinsic.EIGENPAIRS + intrinsic.QUANTILES * len(intrinsic.TIMES))
     a, b = parts["intrinsic"]
     channel = {
         "heat": np.abs(a[cut[0] : cut[1]] - b[cut[0] : cut[1]]).sum(),
         "curvature": np.abs(a[cut[1] :] - b[cut[1] :]).sum(),
-        "sh": np.abs(parts["sh"][0] - parts["sh"][1]).sum(),
+        "panorama": panorama.panorama_distances(
+            *(np.float32([v]) for v in parts["panorama"]), l1_numpy
+        )[0, 0],
         "lf": lf.lf_distances(*(np.float32([v]) for v in parts["lf"]), l1_numpy)[0, 0],
     }
     expected = sum(
@@ -95,9 +103,9 @@ def test_the_bound_is_below_the_distance(vectors):
     rng = np.random.default_rng(3)
     real = np.float32(list(vectors.values()))
     noisy = real.copy()
-    noisy[:, : rigid.HEAD] *= rng.uniform(0.8, 1.2, noisy[:, : rigid.HEAD].shape)
-    noisy[:, rigid.HEAD :] = np.clip(
-        noisy[:, rigid.HEAD :] + rng.integers(-30, 30, (len(real), TAIL)), 0, 255
+    noisy[:, :FLOATS] *= rng.uniform(0.8, 1.2, noisy[:, :FLOATS].shape)
+    noisy[:, FLOATS:] = np.clip(
+        noisy[:, FLOATS:] + rng.integers(-30, 30, (len(real), TAIL)), 0, 255
     )
     rows = np.vstack([real, noisy])
     exact = rigid.rigid_distances(rows, rows, l1_numpy)
@@ -115,8 +123,8 @@ def test_search_equals_a_full_scan(tmp_path, vectors):
     rows = []
     for i in range(30):
         row = base[i % 4].copy()
-        row[: rigid.HEAD] *= rng.uniform(0.9, 1.1, rigid.HEAD)
-        row[rigid.HEAD :] = np.clip(row[rigid.HEAD :] + rng.integers(-40, 40, TAIL), 0, 255)
+        row[:FLOATS] *= rng.uniform(0.9, 1.1, FLOATS)
+        row[FLOATS:] = np.clip(row[FLOATS:] + rng.integers(-40, 40, TAIL), 0, 255)
         rows.append(row)
     rows[5] = rows[9] = rows[2]
     assert_search_equals_full_scan(tmp_path / "index", RIGID, rows, base)
@@ -156,4 +164,24 @@ def test_signature_goes_through_the_repair_stage():
         made = repair_mesh(mesh, mode)
         assert np.array_equal(sig.vector, rigid.rigid_vector(made, params, None, "auto").vector)
         assert sig.vector.shape == (rigid.LENGTH,) and np.isfinite(sig.vector).all()
-        assert np.array_equal(sig.vector[rigid.HEAD :], np.round(sig.vector[rigid.HEAD :]))
+        assert np.array_equal(sig.vector[FLOATS:], np.round(sig.vector[FLOATS:]))
+
+
+def test_an_index_of_an_earlier_rigid_is_refused(tmp_path):
+    """An index whose rows another version of the descriptor made (``rigid`` kept 2,661
+    entries a row before the panorama) is refused in one line that says how to rebuild it, by
+    a query, an evaluation and a writer alike."""
+    two_classes(tmp_path / "data")
+    index = tmp_path / "index"
+    runner = CliRunner()
+    args = ["index", str(tmp_path / "data"), "-o", str(index), "--descriptor", "rigid"]
+    assert runner.invoke(main, args).exit_code == 0
+    write_manifest(index, replace(read_manifest(index), layout=Layout(2661)))
+    for command in (
+        ["query", str(index), str(tmp_path / "data/long/a.off")],
+        ["evaluate", "--index", str(index)],
+        args,
+    ):
+        out = runner.invoke(main, command)
+        assert out.exit_code != 0 and "rebuild it: cfsig index" in out.output, out.output
+        assert "Traceback" not in out.output

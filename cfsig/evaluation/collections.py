@@ -27,6 +27,7 @@ from cfsig.files.folders import find_meshes, mesh_label
 from cfsig.index.store import IndexReader
 from cfsig.isolate import Limits
 from cfsig.params import Params
+from cfsig.search.nearest import check_layout
 from cfsig.search.nearest import distances as descriptor_distances
 from cfsig.search.partial import expanded_distances
 
@@ -223,9 +224,11 @@ def collection_from_index(path: str | os.PathLike) -> tuple[str, Collection]:
     Raises
     ------
     IndexFileError
-        If the index is missing, not HDF5, corrupt, not a cfsig index, or of a newer version.
+        If the index is missing, not HDF5, corrupt, not a cfsig index, of a newer version, or
+        made by an earlier version of its descriptor (`check_layout`).
     """
     with IndexReader(path) as reader:
+        check_layout(reader)
         names, labels, paths = (tuple(reader.column(key)) for key in ("names", "labels", "paths"))
         name = reader.params.descriptor
         return name, Collection(names, labels, paths, reader.signatures[:], descriptor=name)

@@ -461,7 +461,7 @@ class IndexWriter:
                         f"({self._manifest.params.to_json()})"
                     )
                 if layout is not None and layout != self._manifest.layout:
-                    raise IndexFileError(f"{self.path}: built with another layout")
+                    raise IndexFileError(f"{self.path}: built with another layout; {REBUILD}")
                 self._remove_orphans()
             elif layout is None:
                 raise ValueError(f"{self.path}: a new index needs its descriptor's layout")

@@ -22,9 +22,10 @@ import numpy as np
 
 from cfsig import descriptors
 from cfsig.descriptors.base import Distance
+from cfsig.errors import IndexFileError
 from cfsig.index.blocks import Block, plan_blocks, read_block, read_columns, read_rows
 from cfsig.index.sketch import adjust_bounds, query_sketches, threshold
-from cfsig.index.store import Entry, IndexReader, SegmentView
+from cfsig.index.store import REBUILD, Entry, IndexReader, SegmentView
 from cfsig.search.l1 import Kernel, choose_kernel, fast_kernel, l1_numpy
 
 _BLOCK_ROWS = 16384  # rows per block of a dataset that is not chunked
@@ -426,6 +427,27 @@ def nearest_by(
     return best.result(reader)
 
 
+def check_layout(reader: IndexReader) -> None:
+    """Refuse an index whose rows an earlier version of its descriptor made.
+
+    Parameters
+    ----------
+    reader : IndexReader
+        An open index.
+
+    Raises
+    ------
+    IndexFileError
+        Its layout is not the one its descriptor declares now; the message says how to rebuild.
+    """
+    current = descriptors.layout(reader.params)
+    if reader.layout != current:
+        raise IndexFileError(
+            f"{reader.path}: made by an earlier {reader.params.descriptor} descriptor "
+            f"({reader.layout.length} entries a row, now {current.length}); {REBUILD}"
+        )
+
+
 def query(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[Hit]]:
     """The k nearest indexed meshes of each query, with their names and labels.
 
@@ -443,7 +465,13 @@ def query(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[Hi
     hits : list of list of Hit
         One list per query, nearest first: by L1 distance (`nearest`), or by the descriptor's
         own distance where it declares one (`nearest_by`).
+
+    Raises
+    ------
+    IndexFileError
+        As `check_layout`.
     """
+    check_layout(reader)
     distance = descriptors.get(reader.params.descriptor).distance
     if distance is None:
         rows, dists = nearest(reader, queries, k)
