@@ -224,7 +224,7 @@ def partial_rows(name: str, folder: Path, paths: list[Path], tmp: Path, jobs: in
     for ranked, params in RANKINGS.items():
         indexes[ranked] = tmp / f"index-{params.partial_cells}"
         with cfsig.IndexWriter(indexes[ranked], params, cfsig.layout(params)) as writer:
-            _, failures = cfsig.index_meshes(writer, [folder], jobs=jobs)
+            failures = cfsig.index_meshes(writer, [folder], jobs=jobs).failures
         for line in failures:
             print(f"{name}, index: {line}", file=sys.stderr)
     rows = []

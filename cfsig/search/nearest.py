@@ -35,6 +35,10 @@ _FIRST = 1024  # rows of smallest bounds evaluated first per query (at least 4 k
 _SAMPLE = 65536  # bounds sampled to find the cutoff of those rows
 _SCAN_RATIO = 4  # a full scan when the candidates are a quarter of the rows or more
 _EXACT_BATCH = 64  # rows of smallest bounds whose exact distances are computed at a time
+_MANY = 16  # queries from which a group is searched together, block by block (`_Pruned._many`)
+_FIRST_MANY = 64  # rows of smallest bounds evaluated first per query there (at least 4 k)
+_SAMPLE_MANY = 8192  # bounds per query sampled there to find the cutoff of those rows
+_PAIR_BLOCKS = 4  # blocks read at a time there for all the queries (4 chunks: 13 MB at 812)
 
 
 @dataclass(frozen=True)
@@ -247,6 +251,10 @@ class _Pruned:
             return
         n = len(self.excluded)
         group = max(1, _BOUND_CELLS // n)
+        if len(queries) >= _MANY:
+            for q0 in range(0, len(queries), group):
+                self._many(q0, queries[q0 : q0 + group])
+            return
         sketch_kernel = choose_kernel(len(queries) * self.live)
         for q0 in range(0, len(queries), group):
             some = queries[q0 : q0 + group]
@@ -258,6 +266,102 @@ class _Pruned:
                 continue
             for j, rows in enumerate(left):
                 self._refine(q0 + j, some[j], bounds[j], rows)
+
+    def _many(self, q0: int, queries: np.ndarray) -> None:
+        """Merge the nearest rows of queries ``q0...`` into ``best``, all of them together.
+
+        Many queries share each read of a block: the exact distances of each query's
+        `_FIRST_MANY` rows of smallest bounds are computed first, then those of every row its
+        k-th best distance does not rule out, a block at a time for all the queries.
+        """
+        bounds = self._row_bounds(queries, choose_kernel(len(queries) * self.live))
+        bounds[self.excluded] = np.inf
+        # About `_FIRST_MANY` rows a query: those whose bound is at most a cutoff estimated
+        # from a sample of the bounds, twice as many as needed; the k-th best bounds the rest.
+        step = max(1, len(bounds) // _SAMPLE_MANY)
+        sample = np.ascontiguousarray(bounds[::step].T)
+        nth = min(-(-2 * max(_FIRST_MANY, 4 * self.best.k) // step), sample.shape[1]) - 1
+        cutoffs = np.partition(sample, nth, axis=1)[:, nth]
+        picked = ~(bounds > cutoffs)
+        picked[self.excluded] = False
+        self._pairs(q0, queries, picked)
+        limits = [threshold(self.best.kth(q0 + j), self.width) for j in range(len(queries))]
+        left = ~(bounds > np.array(limits, np.float32)) & ~picked  # NaN bounds rule nothing out
+        left[self.excluded] = False
+        if np.count_nonzero(left) * _SCAN_RATIO >= self.live * len(queries):
+            _scan(self.views, queries, self.kernel, self.best, q0)  # reads less than they would
+        else:
+            self._pairs(q0, queries, left)
+
+    def _row_bounds(self, queries: np.ndarray, kernel: Kernel) -> np.ndarray:
+        """(physical rows, q) lower bounds of the float32 distances (others left unset): by
+        row, so that a block of rows' bounds is written in place (L1 is symmetric)."""
+        bounds = np.empty((len(self.excluded), len(queries)), np.float32)
+        sketches = {id(v): query_sketches(queries, v.sketch) for v in self.views if v.sketch}
+        blocks = [
+            (v, b) for v in self.views if v.sketch for b in plan_blocks(v.sketch.rows, _BLOCK_ROWS)
+        ]
+        block_rows = max((b.stop - b.start for _, b in blocks), default=1)
+
+        def work(task: tuple[SegmentView, Block], buffer: np.ndarray, lock: threading.Lock) -> None:
+            view, block = task
+            assert view.sketch is not None
+            rows = read_block(view.sketch.rows, block, buffer)
+            out = bounds[view.start + block.start : view.start + block.stop]
+            sketch, margin = sketches[id(view)]
+            kernel(np.ascontiguousarray(rows), sketch, out)
+            adjust_bounds(out.T, margin, rows.shape[1])
+
+        width = max(v.sketch.rows.shape[1] for v in self.views if v.sketch)
+        parallel(blocks, work, partial(np.empty, (block_rows, width), np.float32))
+        return bounds
+
+    def _pairs(self, q0: int, queries: np.ndarray, wanted: np.ndarray) -> None:
+        """Exact distances of queries ``q0...`` to the rows ``wanted`` (physical rows, q) marks
+        for each, merged into ``best`` once per query: each run of blocks read once for all."""
+        marked, marks = np.nonzero(wanted)  # physical rows ascending, and the query of each
+        runs = [
+            (view, plan[i : i + _PAIR_BLOCKS])
+            for view, plan in zip(self.views, self.plans, strict=True)
+            for i in range(0, len(plan), _PAIR_BLOCKS)
+        ]
+        tasks = []
+        for view, run in runs:
+            lo, hi = np.searchsorted(marked, [view.start + run[0].start, view.start + run[-1].stop])
+            if hi > lo:
+                tasks.append((view, run, slice(int(lo), int(hi))))
+        run_rows = max((run[-1].stop - run[0].start for _, run in runs), default=1)
+        found: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in queries]
+
+        def work(
+            task: tuple[SegmentView, list[Block], slice], buffer: np.ndarray, lock: threading.Lock
+        ) -> None:
+            view, run, pairs = task
+            first = view.start + run[0].start
+            for block in run:
+                at = block.start - run[0].start
+                read_block(view.signatures, block, buffer[at : at + block.stop - block.start])
+            rows = buffer[: run[-1].stop - run[0].start]
+            order = np.argsort(marks[pairs], kind="stable")  # by query, rows ascending in each
+            local, which = marked[pairs][order] - first, marks[pairs][order]
+            cuts = np.flatnonzero(np.diff(which)) + 1
+            done = []
+            for mine, j in zip(np.split(local, cuts), which[np.r_[0, cuts]], strict=True):
+                dist = np.empty((1, len(mine)), np.float32)
+                self.kernel(queries[j][None], rows[mine], dist)
+                done.append((int(j), first + mine, dist[0]))
+            with lock:
+                for j, at_rows, dist_j in done:
+                    found[j].append((at_rows, dist_j))
+
+        parallel(tasks, work, partial(np.empty, (run_rows, self.width), np.float32))
+        for j, parts in enumerate(found):
+            if parts:
+                self.best.merge_rows(
+                    q0 + j,
+                    np.concatenate([r for r, _ in parts]),
+                    np.concatenate([d for _, d in parts]),
+                )
 
     def _bounds(self, queries: np.ndarray, kernel: Kernel) -> np.ndarray:
         """(q, physical rows) lower bounds of the float32 distances (others left unset)."""
@@ -426,6 +530,35 @@ def nearest_by(
     return best.result(reader)
 
 
+def search(reader: IndexReader, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The k nearest rows of each query by the index's descriptor's distance, exactly.
+
+    Parameters
+    ----------
+    reader : IndexReader
+        An open index with N entries.
+    queries : (q, length) float
+        Query signatures, made with the index's parameters.
+    k : int
+        Results per query.
+
+    Returns
+    -------
+    rows, distances : (q, min(k, N)) int64 and float64
+        As `nearest` (L1) or `nearest_by` (a descriptor that declares its own distance).
+    """
+    distance = descriptors.get(reader.params.descriptor).distance
+    if distance is None:
+        return nearest(reader, queries, k)
+    return nearest_by(reader, queries, k, distance)
+
+
+def hits(reader: IndexReader, rows: np.ndarray, dists: np.ndarray) -> list[list[Hit]]:
+    """Results as `Hit` lists: the entries of some rows (q, k) and their distances (q, k)."""
+    entries = iter(reader.entries(rows.ravel()) if rows.size else [])
+    return [[Hit(rank + 1, float(d), next(entries)) for rank, d in enumerate(row)] for row in dists]
+
+
 def query(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[Hit]]:
     """The k nearest indexed meshes of each query, with their names and labels.
 
@@ -444,14 +577,62 @@ def query(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[Hi
         One list per query, nearest first: by L1 distance (`nearest`), or by the descriptor's
         own distance where it declares one (`nearest_by`).
     """
-    distance = descriptors.get(reader.params.descriptor).distance
-    if distance is None:
-        rows, dists = nearest(reader, queries, k)
-    else:
-        rows, dists = nearest_by(reader, queries, k, distance)
-    entries = reader.entries(rows.ravel()) if rows.size else []
-    it = iter(entries)
-    return [[Hit(rank + 1, float(d), next(it)) for rank, d in enumerate(row)] for row in dists]
+    return hits(reader, *search(reader, queries, k))
+
+
+def query_names(reader: IndexReader, names: list[str], k: int = 20) -> list[list[Hit]]:
+    """The k nearest other entries of some indexed entries, by their stored signatures.
+
+    Parameters
+    ----------
+    reader : IndexReader
+        An open index.
+    names : list of str
+        Entry names: each is the query, and is left out of its own results.
+    k : int
+        Results per query.
+
+    Returns
+    -------
+    hits : list of list of Hit
+        As `query` gives for the entries' files, less each entry itself.
+
+    Raises
+    ------
+    UnknownNameError
+        A name is not in the index.
+    """
+    rows = reader.find(names)
+    found, dists = search(reader, reader.signatures[rows], k + 1)
+    return hits(reader, *without_self(rows, found, dists, k))
+
+
+def without_self(
+    rows: np.ndarray, found: np.ndarray, dists: np.ndarray, k: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The k results of queries that are rows of the index, each row left out of its own.
+
+    Parameters
+    ----------
+    rows : (q,) int
+        The queries' rows.
+    found, dists : (q, k + 1) int64 and float64
+        Their nearest rows and distances, as `search` gives them for k + 1.
+    k : int
+        Results to keep.
+
+    Returns
+    -------
+    found, dists : (q, min(k, N - 1))
+        Without each query's own row (or the last, when other rows tie with it at its rank).
+    """
+    own = found == np.asarray(rows)[:, None]
+    own[~own.any(axis=1), -1] = True  # then it ranked below k + 1 others (ties at 0)
+    keep = ~own
+    width = min(k, found.shape[1] - 1)
+    return found[keep].reshape(len(rows), -1)[:, :width], dists[keep].reshape(len(rows), -1)[
+        :, :width
+    ]
 
 
 class _Best:

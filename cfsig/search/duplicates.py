@@ -1,0 +1,141 @@
+"""Questions of a whole collection: each entry's nearest others, and groups of near-duplicates.
+
+Every entry is a query against the index, a batch at a time, by the search `cfsig.query` makes
+(`cfsig.search.nearest.search`: pruned by sketches, equal to a full scan): memory holds one
+batch of queries and the search's own bounded buffers, whatever the index's size, and the
+results stream out as they come.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from cfsig.index.store import Entry, IndexReader
+from cfsig.search.nearest import Hit, hits, search, without_self
+
+BATCH = 1024  # entries searched at a time
+_FIRST_K = 8  # neighbours asked per entry by `duplicate_groups`, then more where all are close
+BELOW = 0.45  # the default threshold, for the default descriptor: docs/guide.md says why
+
+Progress = Callable[[int], None]  # called with the number of entries done since the last call
+
+
+@dataclass(frozen=True)
+class Group:
+    """Entries joined by distances below a threshold, directly or through others.
+
+    Attributes
+    ----------
+    entries : list of Entry
+        In row order.
+    distance : float
+        The largest of the distances that join them.
+    """
+
+    entries: list[Entry]
+    distance: float
+
+
+def nearest_all(
+    reader: IndexReader, k: int, progress: Progress | None = None
+) -> Iterator[tuple[Entry, list[Hit]]]:
+    """Every entry's k nearest other entries, in row order.
+
+    Parameters
+    ----------
+    reader : IndexReader
+        An open index.
+    k : int
+        Neighbours per entry.
+    progress : callable, optional
+        Called with the number of entries done after each batch.
+
+    Yields
+    ------
+    entry : Entry
+        An entry of the index.
+    hits : list of Hit
+        Its k nearest others, as `cfsig.query` ranks them, itself left out.
+    """
+    for rows in _batches(len(reader)):
+        found, dists = search(reader, reader.signatures[rows], k + 1)
+        found, dists = without_self(rows, found, dists, k)
+        yield from zip(reader.entries(rows), hits(reader, found, dists), strict=True)
+        if progress:
+            progress(len(rows))
+
+
+def duplicate_groups(
+    reader: IndexReader, below: float = BELOW, progress: Progress | None = None
+) -> list[Group]:
+    """The groups of entries closer than ``below`` to one another, directly or through others.
+
+    Each entry's neighbours closer than ``below`` are found exactly: `_FIRST_K` are asked
+    first, then four times as many for the entries whose neighbours are all that close. Memory
+    holds a batch of queries and the entries that have a near neighbour.
+
+    Parameters
+    ----------
+    reader : IndexReader
+        An open index.
+    below : float
+        Distances below this join two entries (the descriptor's distance: L1 for most).
+    progress : callable, optional
+        Called with the number of entries done after each batch.
+
+    Returns
+    -------
+    groups : list of Group
+        Of two entries or more, ordered by their first row.
+    """
+    parent: dict[int, int] = {}
+    widest: dict[int, float] = {}
+    for rows in _batches(len(reader)):
+        todo, k = rows, _FIRST_K
+        while len(todo):
+            found, dists = without_self(todo, *search(reader, reader.signatures[todo], k + 1), k)
+            for row, others, d in zip(todo, found, dists, strict=True):
+                for other, distance in zip(others[d < below], d[d < below], strict=True):
+                    _join(parent, widest, int(row), int(other), float(distance))
+            full = (dists < below).all(axis=1) & (found.shape[1] == k)
+            todo, k = todo[full], 4 * k
+        if progress:
+            progress(len(rows))
+    members: dict[int, list[int]] = {}
+    for row in sorted(parent):
+        members.setdefault(_root(parent, row), []).append(row)
+    return [
+        Group(reader.entries(np.array(group)), widest[root])
+        for root, group in sorted(members.items(), key=lambda item: item[1][0])
+    ]
+
+
+def _batches(n: int) -> Iterator[np.ndarray]:
+    """Row numbers 0 to n in runs of `BATCH`."""
+    for first in range(0, n, BATCH):
+        yield np.arange(first, min(first + BATCH, n))
+
+
+def _root(parent: dict[int, int], row: int) -> int:
+    """The representative of a row's group, halving the path on the way."""
+    while parent[row] != row:
+        parent[row] = parent[parent[row]]
+        row = parent[row]
+    return row
+
+
+def _join(
+    parent: dict[int, int], widest: dict[int, float], a: int, b: int, distance: float
+) -> None:
+    """Join the groups of rows a and b, keeping the largest distance that joins each group."""
+    for row in (a, b):
+        if row not in parent:
+            parent[row], widest[row] = row, 0.0
+    ra, rb = _root(parent, a), _root(parent, b)
+    top = max(widest[ra], widest[rb], distance)
+    if ra != rb:
+        parent[rb] = ra
+    widest[ra] = top
