@@ -18,7 +18,7 @@ from cfsig.search.nearest import Hit, hits, search, without_self
 
 BATCH = 1024  # entries searched at a time
 _FIRST_K = 8  # neighbours asked per entry by `duplicate_groups`, then more where all are close
-BELOW = 0.45  # the default threshold, for the default descriptor: docs/guide.md says why
+BELOW = 0.43  # the default threshold, for the default descriptor: docs/guide.md says why
 
 Progress = Callable[[int], None]  # called with the number of entries done since the last call
 

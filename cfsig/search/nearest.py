@@ -274,7 +274,7 @@ class _Pruned:
         `_FIRST_MANY` rows of smallest bounds are computed first, then those of every row its
         k-th best distance does not rule out, a block at a time for all the queries.
         """
-        bounds = self._row_bounds(queries, choose_kernel(len(queries) * self.live))
+        bounds = self._bounds(queries, choose_kernel(len(queries) * self.live), by_row=True)
         bounds[self.excluded] = np.inf
         # About `_FIRST_MANY` rows a query: those whose bound is at most a cutoff estimated
         # from a sample of the bounds, twice as many as needed; the k-th best bounds the rest.
@@ -292,29 +292,6 @@ class _Pruned:
             _scan(self.views, queries, self.kernel, self.best, q0)  # reads less than they would
         else:
             self._pairs(q0, queries, left)
-
-    def _row_bounds(self, queries: np.ndarray, kernel: Kernel) -> np.ndarray:
-        """(physical rows, q) lower bounds of the float32 distances (others left unset): by
-        row, so that a block of rows' bounds is written in place (L1 is symmetric)."""
-        bounds = np.empty((len(self.excluded), len(queries)), np.float32)
-        sketches = {id(v): query_sketches(queries, v.sketch) for v in self.views if v.sketch}
-        blocks = [
-            (v, b) for v in self.views if v.sketch for b in plan_blocks(v.sketch.rows, _BLOCK_ROWS)
-        ]
-        block_rows = max((b.stop - b.start for _, b in blocks), default=1)
-
-        def work(task: tuple[SegmentView, Block], buffer: np.ndarray, lock: threading.Lock) -> None:
-            view, block = task
-            assert view.sketch is not None
-            rows = read_block(view.sketch.rows, block, buffer)
-            out = bounds[view.start + block.start : view.start + block.stop]
-            sketch, margin = sketches[id(view)]
-            kernel(np.ascontiguousarray(rows), sketch, out)
-            adjust_bounds(out.T, margin, rows.shape[1])
-
-        width = max(v.sketch.rows.shape[1] for v in self.views if v.sketch)
-        parallel(blocks, work, partial(np.empty, (block_rows, width), np.float32))
-        return bounds
 
     def _pairs(self, q0: int, queries: np.ndarray, wanted: np.ndarray) -> None:
         """Exact distances of queries ``q0...`` to the rows ``wanted`` (physical rows, q) marks
@@ -363,9 +340,11 @@ class _Pruned:
                     np.concatenate([d for _, d in parts]),
                 )
 
-    def _bounds(self, queries: np.ndarray, kernel: Kernel) -> np.ndarray:
-        """(q, physical rows) lower bounds of the float32 distances (others left unset)."""
-        bounds = np.empty((len(queries), len(self.excluded)), np.float32)
+    def _bounds(self, queries: np.ndarray, kernel: Kernel, by_row: bool = False) -> np.ndarray:
+        """(q, physical rows) lower bounds of the float32 distances (others left unset); or
+        ``by_row``, (physical rows, q), each block's then written in place (L1 is symmetric)."""
+        shape = (len(self.excluded), len(queries)) if by_row else (len(queries), len(self.excluded))
+        bounds = np.empty(shape, np.float32)
         sketches = {id(v): query_sketches(queries, v.sketch) for v in self.views if v.sketch}
         blocks = [
             (v, b) for v in self.views if v.sketch for b in plan_blocks(v.sketch.rows, _BLOCK_ROWS)
@@ -377,9 +356,13 @@ class _Pruned:
             assert view.sketch is not None
             rows = read_block(view.sketch.rows, block, buffer)
             at = slice(view.start + block.start, view.start + block.stop)
+            sketch, margin = sketches[id(view)]
+            if by_row:
+                kernel(rows, sketch, bounds[at])
+                adjust_bounds(bounds[at].T, margin, rows.shape[1])
+                return
             one = len(queries) == 1  # then a slice of the bounds is C-contiguous: written to
             out = bounds[:, at] if one else np.empty((len(queries), len(rows)), np.float32)
-            sketch, margin = sketches[id(view)]
             kernel(sketch, rows, out)
             adjust_bounds(out, margin, rows.shape[1])
             if not one:
