@@ -32,7 +32,7 @@ import cfsig
 from cfsig.search.duplicates import duplicate_groups
 from cfsig.search.nearest import distances
 
-QUANTILES = (0.0, 0.01, 0.05, 0.1, 0.5)
+QUANTILES = (0.0, 0.05, 0.1, 0.5, 0.9)
 SWEEP = (0.2, 0.3, 0.4, 0.45, 0.5, 0.6, 0.7, 1.0, 1.4)
 
 

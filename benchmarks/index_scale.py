@@ -17,12 +17,15 @@ building. Then measures, in this process:
 - info: the whole command ``cfsig info INDEX``, interpreter start included (median of 5);
 - remove: open a writer, remove 1,000 rows, commit (`cfsig.IndexWriter.remove`; median of
   ``--repeat``, other rows each time);
-- with ``--duplicates``: the whole command ``cfsig duplicates INDEX --top 10``, once.
+- with ``--duplicates``: the whole command ``cfsig duplicates INDEX --top 10``, once: wall
+  seconds, and CPU seconds of all its threads (what a machine shared with other work inflates
+  the least).
 """
 
 from __future__ import annotations
 
 import argparse
+import resource
 import statistics
 import subprocess
 import sys
@@ -109,12 +112,14 @@ def query_seconds(path: Path, rows: Rows) -> list[float]:
     return times[1:]
 
 
-def command_seconds(*args: object) -> float:
-    """Wall seconds of the command ``python -m cfsig ARGS``, its output discarded."""
+def command_seconds(*args: object) -> tuple[float, float]:
+    """Wall and CPU seconds of the command ``python -m cfsig ARGS``, its output discarded."""
+    cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     command = [sys.executable, "-m", "cfsig", *map(str, args)]
     subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return time.perf_counter() - start
+    wall, after = time.perf_counter() - start, resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, after.ru_utime + after.ru_stime - cpu.ru_utime - cpu.ru_stime
 
 
 def remove_seconds(path: Path, repeat: int) -> list[float]:
@@ -148,9 +153,12 @@ def main() -> None:
         path = args.dir / f"scale-{n}"
         built = "reused" if (path / "manifest.h5").exists() else f"{build(path, n, rows):.0f} s"
         commits, queries = commit_seconds(path, rows, args.repeat), query_seconds(path, rows)
-        infos = [command_seconds("info", path) for _ in range(5)]
+        infos = [command_seconds("info", path)[0] for _ in range(5)]
         removals = remove_seconds(path, args.repeat)
-        top = f"{command_seconds('duplicates', path, '--top', TOP):.0f}" if args.duplicates else ""
+        top = ""
+        if args.duplicates:
+            wall, cpu = command_seconds("duplicates", path, "--top", TOP)
+            top = f"{wall:.0f} ({cpu:.0f} CPU)"
         with cfsig.IndexReader(path) as reader:
             count = len(reader)
         lines.append(

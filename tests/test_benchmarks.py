@@ -99,7 +99,7 @@ def test_index_scale(tmp_path):
     assert "| rows | rows now | build | commit of 1,000 rows s (median) | max | query s |" in out
     assert "| `cfsig info` s | removal of 1,000 rows s (median) | max |" in out
     # two commits of 1,000 rows, then two removals of 1,000
-    numbers = rf"( {NUMBER} \|){{6}} \d+ \|"
+    numbers = rf"( {NUMBER} \|){{6}} \d+ \(\d+ CPU\) \|"
     assert re.search(rf"\| 2,000 \| 2,000 \| \d+ s \|{numbers}", out)
 
 

@@ -4,6 +4,7 @@ queries by an indexed name, near-duplicates of the whole index, and folders reac
 import json
 import shutil
 from collections import Counter
+from dataclasses import replace
 from datetime import datetime, timezone
 
 import numpy as np
@@ -14,10 +15,13 @@ import cfsig
 import cfsig.search.nearest
 from cfsig.cli import main
 from cfsig.files.demo import make_demo_collection
+from cfsig.index.segments import write_segment
 from cfsig.index.store import (
     Entry,
     IndexReader,
+    SegmentInfo,
     check_index,
+    file_crc,
     index_info,
     read_manifest,
     write_manifest,
@@ -299,6 +303,22 @@ def test_check_covers_the_class_counts_and_the_drops(tmp_path):
         writer.remove(["c0/3.off"])
     assert check_index(index) == []
     manifest = read_manifest(index)
-    write_manifest(index, type(manifest)(**{**vars(manifest), "classes": (("c0", 2),)}))
+    write_manifest(index, replace(manifest, classes=(("c0", 2),)))
     (problem,) = check_index(index)
     assert "class counts do not match" in problem
+
+
+def test_check_names_a_drop_of_a_row_no_older_segment_holds(tmp_path):
+    index = tmp_path / "index"
+    build_index(index, 6)
+    manifest = read_manifest(index)
+    (first,) = manifest.segments
+    bogus = SegmentInfo(manifest.next_id, 0, 0, 0)  # a removal of row 99 of a 6-row segment
+    write_segment(index / bogus.file, bogus.id, manifest.layout, 0, [], np.array([[first.id, 99]]))
+    bogus = replace(bogus, crc32=file_crc(index / bogus.file))
+    segments = (replace(first, live=first.live - 1), bogus)
+    write_manifest(index, replace(manifest, segments=segments, next_id=bogus.id + 1))
+    problems = check_index(index)
+    assert any(
+        p.endswith(f"{bogus.file}: drops a row that is not in an older segment") for p in problems
+    )
