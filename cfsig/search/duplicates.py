@@ -1,9 +1,10 @@
 """Questions of a whole collection: each entry's nearest others, and groups of near-duplicates.
 
 Every entry is a query against the index, a batch at a time, by the search `cfsig.query` makes
-(`cfsig.search.nearest.search`: pruned by sketches, equal to a full scan): memory holds one
-batch of queries and the search's own bounded buffers, whatever the index's size, and the
-results stream out as they come.
+(`cfsig.search.nearest.search`: pruned by sketches, equal to a full scan), in batches as large
+as the search takes at once (`cfsig.search.nearest.group_size`): memory holds one batch of
+queries and the search's own bounded buffers, whatever the index's size, and the results
+stream out as they come.
 """
 
 from __future__ import annotations
@@ -14,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from cfsig.index.store import Entry, IndexReader
-from cfsig.search.nearest import Hit, hits, search, without_self
+from cfsig.search.nearest import Hit, group_size, hits, search, without_self
 
-BATCH = 1024  # entries searched at a time
+BATCH = 4096  # entries searched at a time at most
 _FIRST_K = 8  # neighbours asked per entry by `duplicate_groups`, then more where all are close
 BELOW = 0.43  # the default threshold, for the default descriptor: docs/guide.md says why
 
@@ -60,7 +61,7 @@ def nearest_all(
     hits : list of Hit
         Its k nearest others, as `cfsig.query` ranks them, itself left out.
     """
-    for rows in _batches(len(reader)):
+    for rows in _batches(reader):
         found, dists = search(reader, reader.signatures[rows], k + 1)
         found, dists = without_self(rows, found, dists, k)
         yield from zip(reader.entries(rows), hits(reader, found, dists), strict=True)
@@ -93,7 +94,7 @@ def duplicate_groups(
     """
     parent: dict[int, int] = {}
     widest: dict[int, float] = {}
-    for rows in _batches(len(reader)):
+    for rows in _batches(reader):
         todo, k = rows, _FIRST_K
         while len(todo):
             found, dists = without_self(todo, *search(reader, reader.signatures[todo], k + 1), k)
@@ -113,10 +114,12 @@ def duplicate_groups(
     ]
 
 
-def _batches(n: int) -> Iterator[np.ndarray]:
-    """Row numbers 0 to n in runs of `BATCH`."""
-    for first in range(0, n, BATCH):
-        yield np.arange(first, min(first + BATCH, n))
+def _batches(reader: IndexReader) -> Iterator[np.ndarray]:
+    """The row numbers of an index, in runs of as many queries as its search takes at once
+    (at most `BATCH`)."""
+    n, size = len(reader), min(BATCH, group_size(reader))
+    for first in range(0, n, size):
+        yield np.arange(first, min(first + size, n))
 
 
 def _root(parent: dict[int, int], row: int) -> int:

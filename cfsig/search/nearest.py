@@ -250,7 +250,7 @@ class _Pruned:
             _scan(self.views, queries, self.kernel, self.best, 0)
             return
         n = len(self.excluded)
-        group = max(1, _BOUND_CELLS // n)
+        group = max(1, _BOUND_CELLS // n)  # as `group_size`
         if len(queries) >= _MANY:
             for q0 in range(0, len(queries), group):
                 self._many(q0, queries[q0 : q0 + group])
@@ -511,6 +511,22 @@ def nearest_by(
                 exact = distance.exact(query[None], np.ascontiguousarray(values), kernel)
                 best.merge_rows(j, mine, exact[0].astype(np.float32))
     return best.result(reader)
+
+
+def group_size(reader: IndexReader) -> int:
+    """How many queries a search of this index takes at a time: as many as `_BOUND_CELLS`
+    bounds hold. A caller with many queries gives them in multiples of it.
+
+    Parameters
+    ----------
+    reader : IndexReader
+        An open index.
+
+    Returns
+    -------
+    queries : int
+    """
+    return max(1, _BOUND_CELLS // max(1, reader.physical_rows))
 
 
 def search(reader: IndexReader, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
