@@ -254,6 +254,7 @@ def test_duplicates_equal_brute_force(tmp_path, monkeypatch, pruned):
         monkeypatch.setattr(cfsig.search.nearest, "_FIRST", 4)
         monkeypatch.setattr(cfsig.search.nearest, "_SCAN_RATIO", 1)
         monkeypatch.setattr(cfsig.search.nearest, "_FIRST_MANY", 2)
+        monkeypatch.setattr(cfsig.search.nearest, "_MANY", 8)  # batches of 16 go together
     monkeypatch.setattr(cfsig.search.duplicates, "BATCH", 16)  # several batches
     index = tmp_path / "index"
     vectors = _planted(index)

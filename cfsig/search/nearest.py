@@ -35,7 +35,10 @@ _FIRST = 1024  # rows of smallest bounds evaluated first per query (at least 4 k
 _SAMPLE = 65536  # bounds sampled to find the cutoff of those rows
 _SCAN_RATIO = 4  # a full scan when the candidates are a quarter of the rows or more
 _EXACT_BATCH = 64  # rows of smallest bounds whose exact distances are computed at a time
-_MANY = 16  # queries from which a group is searched together, block by block (`_Pruned._many`)
+# Queries from which a group is searched together, block by block (`_Pruned._many`): a group of
+# as many reads the rows twice for all, fewer reads a query than one query at a time up to
+# about 500,000 rows (groups of 64 or more; docs/method.md).
+_MANY = 64
 _FIRST_MANY = 64  # rows of smallest bounds evaluated first per query there (at least 4 k)
 _SAMPLE_MANY = 8192  # bounds per query sampled there to find the cutoff of those rows
 _PAIR_BLOCKS = 4  # blocks read at a time there for all the queries (4 chunks: 13 MB at 812)
@@ -251,7 +254,7 @@ class _Pruned:
             return
         n = len(self.excluded)
         group = max(1, _BOUND_CELLS // n)  # as `group_size`
-        if len(queries) >= _MANY:
+        if min(len(queries), group) >= _MANY:
             for q0 in range(0, len(queries), group):
                 self._many(q0, queries[q0 : q0 + group])
             return
