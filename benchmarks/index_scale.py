@@ -1,6 +1,7 @@
-"""The index at scale: the time of a commit and of a query against the number of rows.
+"""The index at scale: the time of a commit, a query, `info` and a removal against its rows.
 
     python benchmarks/index_scale.py --dir DIR --sizes 1000000 [--real INDEX] [--repeat 5]
+        [--duplicates]
 
 For each size N, builds ``DIR/scale-N`` (or reuses it) with `cfsig.IndexWriter`: N rows of the
 default parameters, each a random mix of two signatures of the index ``--real`` (``cfsig index
@@ -12,13 +13,21 @@ building. Then measures, in this process:
 
 - commit: open a writer, add 1,000 new rows, commit (median of ``--repeat``, merges included);
 - query: open a reader, the 20 nearest rows of one new row with their names (`cfsig.query`),
-  median of 3 after one warm-up.
+  median of 3 after one warm-up;
+- info: the whole command ``cfsig info INDEX``, interpreter start included (median of 5);
+- remove: open a writer, remove 1,000 rows, commit (`cfsig.IndexWriter.remove`; median of
+  ``--repeat``, other rows each time);
+- with ``--duplicates``: the whole command ``cfsig duplicates INDEX --top 10``, once: wall
+  seconds, and CPU seconds of all its threads (what a machine shared with other work inflates
+  the least).
 """
 
 from __future__ import annotations
 
 import argparse
+import resource
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -33,7 +42,9 @@ PARAMS = cfsig.Params()
 NOISE = 0.02
 BUILD_ROWS = 1_000_000
 COMMIT_ROWS = 1_000
+REMOVE_ROWS = 1_000
 K = 20
+TOP = 10
 
 
 class Rows:
@@ -101,6 +112,32 @@ def query_seconds(path: Path, rows: Rows) -> list[float]:
     return times[1:]
 
 
+def command_seconds(*args: object) -> tuple[float, float]:
+    """Wall and CPU seconds of the command ``python -m cfsig ARGS``, its output discarded."""
+    cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    command = [sys.executable, "-m", "cfsig", *map(str, args)]
+    subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    wall, after = time.perf_counter() - start, resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, after.ru_utime + after.ru_stime - cpu.ru_utime - cpu.ru_stime
+
+
+def remove_seconds(path: Path, repeat: int) -> list[float]:
+    """Open a writer, remove `REMOVE_ROWS` rows, commit: seconds of each of ``repeat``."""
+    times = []
+    with cfsig.IndexReader(path) as reader:
+        names = reader.entries(
+            np.arange(repeat * REMOVE_ROWS) * (len(reader) // (repeat * REMOVE_ROWS))
+        )
+    for r in range(repeat):
+        gone = [e.name for e in names[r * REMOVE_ROWS : (r + 1) * REMOVE_ROWS]]
+        start = time.perf_counter()
+        with cfsig.IndexWriter(path, PARAMS) as writer:
+            writer.remove(gone)
+        times.append(time.perf_counter() - start)
+    return times
+
+
 def main() -> None:
     """Build or reuse each index, measure it, print a table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -108,6 +145,7 @@ def main() -> None:
     parser.add_argument("--sizes", type=int, nargs="+", default=[1_000_000], help="rows")
     parser.add_argument("--repeat", type=int, default=5, help="commits timed per index")
     parser.add_argument("--real", type=Path, help="an index of a collection to mix rows from")
+    parser.add_argument("--duplicates", action="store_true", help=f"time duplicates --top {TOP}")
     args = parser.parse_args()
     rows = Rows(args.dir / "demo", args.real)
     lines = []
@@ -115,14 +153,24 @@ def main() -> None:
         path = args.dir / f"scale-{n}"
         built = "reused" if (path / "manifest.h5").exists() else f"{build(path, n, rows):.0f} s"
         commits, queries = commit_seconds(path, rows, args.repeat), query_seconds(path, rows)
+        infos = [command_seconds("info", path)[0] for _ in range(5)]
+        removals = remove_seconds(path, args.repeat)
+        top = ""
+        if args.duplicates:
+            wall, cpu = command_seconds("duplicates", path, "--top", TOP)
+            top = f"{wall:.0f} ({cpu:.0f} CPU)"
         with cfsig.IndexReader(path) as reader:
             count = len(reader)
         lines.append(
             [f"{n:,}", f"{count:,}", built, f"{statistics.median(commits):.3f}",
-             f"{max(commits):.3f}", f"{statistics.median(queries):.3f}"]
+             f"{max(commits):.3f}", f"{statistics.median(queries):.3f}",
+             f"{statistics.median(infos):.3f}", f"{statistics.median(removals):.3f}",
+             f"{max(removals):.3f}", top]
         )  # fmt: skip
         print(f"scale-{n}: done", flush=True)
-    heads = ["rows", "rows now", "build", "commit of 1,000 rows s (median)", "max", "query s"]
+    heads = ["rows", "rows now", "build", "commit of 1,000 rows s (median)", "max", "query s",
+             "`cfsig info` s", "removal of 1,000 rows s (median)", "max",
+             f"`duplicates --top {TOP}` s"]  # fmt: skip
     print(table(heads, lines))
 
 

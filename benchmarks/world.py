@@ -322,7 +322,7 @@ def collection_rows(
         for ranked, params in RANKINGS.items():
             indexes[ranked] = tmp / f"index-{params.partial_cells}"
             with cfsig.IndexWriter(indexes[ranked], params, cfsig.layout(params)) as writer:
-                _, failures = cfsig.index_meshes(writer, [tmp / "wholes"], jobs=jobs)
+                failures = cfsig.index_meshes(writer, [tmp / "wholes"], jobs=jobs).failures
             for line in failures:
                 print(line, file=sys.stderr)
         for rows, paths, asked, parts in (

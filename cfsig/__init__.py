@@ -26,10 +26,14 @@ _EXPORTS = {
     "Entry": "index.store",
     "IndexReader": "index.store",
     "IndexWriter": "index.store",
+    "index_info": "index.store",
     "index_meshes": "batch",
     "compute_many": "batch",
     "Hit": "search.nearest",
     "query": "search.nearest",
+    "query_names": "search.nearest",
+    "nearest_all": "search.duplicates",
+    "duplicate_groups": "search.duplicates",
     "partial_file": "descriptors.parts",
     "query_part": "search.partial",
     "evaluate_partial": "evaluation.collections",
@@ -58,17 +62,21 @@ __all__ = [
     "compute_collection",
     "compute_many",
     "compute_signature",
+    "duplicate_groups",
     "evaluate_collections",
     "evaluate_distances",
     "evaluate_partial",
     "evaluate_queries",
+    "index_info",
     "index_meshes",
     "layout",
+    "nearest_all",
     "read_cla",
     "partial_file",
     "query_part",
     "read_mesh",
     "query",
+    "query_names",
     "signature_file",
 ]  # the keys of _EXPORTS and __version__ (tests/test_api.py checks)
 
@@ -88,9 +96,10 @@ if TYPE_CHECKING:
     from cfsig.evaluation.measures import RetrievalReport, evaluate_distances, evaluate_queries
     from cfsig.files.cla import read_cla
     from cfsig.files.mesh import read_mesh
-    from cfsig.index.store import Entry, IndexReader, IndexWriter
+    from cfsig.index.store import Entry, IndexReader, IndexWriter, index_info
     from cfsig.params import Params
-    from cfsig.search.nearest import Hit, query
+    from cfsig.search.duplicates import duplicate_groups, nearest_all
+    from cfsig.search.nearest import Hit, query, query_names
     from cfsig.search.partial import query_part
 
     __version__: str

@@ -6,7 +6,7 @@ import multiprocessing
 import os
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -15,7 +15,14 @@ from itertools import islice
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
-from cfsig.errors import CfsigError, ClusterError, MissingDependencyError
+from cfsig.errors import (
+    CfsigError,
+    ClusterError,
+    EmptyPathError,
+    MissingDependencyError,
+    UnknownNameError,
+)
+from cfsig.files.cla import labels_from_cla
 from cfsig.files.folders import find_meshes, mesh_label
 from cfsig.params import Params
 
@@ -51,6 +58,30 @@ class Outcome(Generic[Result]):
     path: Path
     signature: Result | None
     error: str = ""
+
+
+@dataclass(frozen=True)
+class Indexed:
+    """What `index_meshes` did to an index.
+
+    Attributes
+    ----------
+    added : int
+        Meshes added or updated.
+    updated : int
+        Entries indexed already given a new label (by the classes) or path (a file moved with
+        its folder), their signatures kept.
+    pruned : int
+        Entries dropped because their file no longer exists.
+    failures : list of str
+        One line per file that failed or whose name another file already took,
+        ``<file>: <reason>``.
+    """
+
+    added: int
+    updated: int
+    pruned: int
+    failures: list[str]
 
 
 # progress(outcomes, total): wraps the outcomes; total() is the number expected so far, which
@@ -154,7 +185,9 @@ def index_meshes(
     commit_every: int = 200,
     progress: Progress | None = None,
     limits: Limits | None = None,
-) -> tuple[int, list[str]]:
+    classes: Mapping[str, str] | None = None,
+    prune: bool = False,
+) -> Indexed:
     """Compute the new and changed meshes under some files and folders and add them to an index.
 
     Files are found by `cfsig.files.folders.find_meshes` as the computation goes: the first is
@@ -162,10 +195,12 @@ def index_meshes(
     as soon as it is found, not after the whole folder has been scanned. A file whose name is
     indexed with the same contents (SHA-256) is skipped, and only those files are hashed; the
     others are computed by `compute_many` and added as `Entry` (name, the name of the folder
-    holding the file as label, absolute path). The writer commits every ``commit_every``
-    meshes and every 30 s, so a killed job keeps what it committed; the caller's ``with
-    writer`` commits the rest. Memory holds the files in flight, not the folder (and, when
-    several paths are given, the names seen, to refuse a name taken twice).
+    holding the file as label, absolute path as given, links not resolved). The writer commits
+    every ``commit_every`` meshes and every 30 s, so a killed job keeps what it committed;
+    the caller's ``with writer`` commits the rest, with the relabelling and pruning queued
+    last, together. Memory holds the files in flight, not the folder (and, when several paths
+    are given, the names seen, to refuse a name taken twice; with ``classes``, the names under
+    the paths; with ``classes`` or ``prune``, the index's names).
 
     Parameters
     ----------
@@ -187,32 +222,43 @@ def index_meshes(
         files to compute found so far.
     limits : Limits, optional
         As `compute_many`.
+    classes : mapping of str to str, optional
+        Model id -> class (`cfsig.files.cla.read_cla`): the label of every mesh, added or
+        already indexed, whose id it lists (`cfsig.files.cla.labels_from_cla`); the others
+        keep their folder's name. Relabelling recomputes nothing.
+    prune : bool
+        Drop the entries whose file, under one of the folders given, no longer exists.
 
     Returns
     -------
-    added : int
-        Meshes added or updated.
-    failures : list of str
-        One line per file that failed or whose name another file already took,
-        ``<file>: <reason>``.
+    indexed : Indexed
 
     Raises
     ------
     MissingDependencyError, ClusterError
         As `compute_many`.
+    EmptyPathError
+        A folder given holds no mesh file: nothing is changed.
+    UnknownNameError
+        ``classes`` lists ids that no mesh indexed or under the paths has: nothing is changed.
     IndexFileError
         A commit failed.
     """
     from cfsig.index.store import Entry
 
     roots = list(paths)
+    check_inputs(writer.path, roots, classes)
     names: dict[Path, str] = {}  # the files found to compute (those in flight), and their names
     taken: set[str] | None = set() if len(roots) > 1 else None  # one folder has unique names
     failures: list[str] = []
-    found = 0
+    kept: list[Entry] = []  # files indexed already, whose label or path may have changed
+    found = updated = 0
+
+    def label(path: Path) -> str:
+        return (labels_from_cla([path.name], classes)[0] if classes else None) or mesh_label(path)
 
     def todo() -> Iterator[Path]:
-        nonlocal found
+        nonlocal found, updated
         for path, name in find_meshes(roots):
             if taken is not None and name in taken:
                 failures.append(f"{path}: its name {name!r} is already taken by another file")
@@ -223,16 +269,101 @@ def index_meshes(
                 names[path] = name
                 found += 1
                 yield path
+            else:
+                kept.append(Entry(name, label(path), os.path.abspath(path)))
+                if len(kept) >= commit_every:
+                    updated += writer.update(kept)
+                    kept.clear()
 
     added, last_commit = 0, time.monotonic()
     outcomes = compute_many(todo(), writer.params, solver, jobs, scheduler, limits=limits)
     for path, signature in successes(outcomes, lambda: found, failures, strict, progress):
-        writer.add(Entry(names.pop(path), mesh_label(path), str(path.resolve())), signature)
+        writer.add(Entry(names.pop(path), label(path), os.path.abspath(path)), signature)
         added += 1
         if writer.pending >= commit_every or time.monotonic() - last_commit > _COMMIT_SECONDS:
             writer.commit()
             last_commit = time.monotonic()
-    return added, failures
+    updated += writer.update(kept)
+    writer.commit()
+    updated += _relabel(writer, classes) if classes else 0
+    pruned = _prune(writer, roots) if prune else 0
+    return Indexed(added, updated, pruned, failures)
+
+
+def _committed(writer: IndexWriter, *columns: str) -> list:
+    """Some columns of the rows an index has committed."""
+    from cfsig.index.store import IndexReader
+
+    with IndexReader(writer.path) as reader:
+        return [reader.column(key) for key in columns]
+
+
+def check_inputs(
+    index: str | os.PathLike,
+    paths: Iterable[str | os.PathLike],
+    classes: Mapping[str, str] | None = None,
+) -> None:
+    """Refuse what `index_meshes` refuses before it changes anything.
+
+    Parameters
+    ----------
+    index : str or path-like
+        The index, existing or not.
+    paths : iterable of str or path-like
+        Mesh files and folders.
+    classes : mapping of str to str, optional
+        As `index_meshes` takes them.
+
+    Raises
+    ------
+    EmptyPathError
+        A folder holds no mesh file.
+    UnknownNameError
+        ``classes`` lists an id that no mesh indexed or under ``paths`` has.
+    IndexFileError
+        With ``classes``: the index is unusable.
+    """
+    from cfsig.index.store import IndexReader, existing_params
+
+    roots = list(paths)
+    for root in roots:
+        if Path(root).is_dir() and next(find_meshes([root]), None) is None:
+            raise EmptyPathError(f"{root}: no mesh file under it")
+    if classes is None:
+        return
+    names = [name for _, name in find_meshes(roots)]
+    if existing_params(index) is not None:
+        with IndexReader(index) as reader:
+            names += list(reader.column("names"))
+    stems = [Path(name).stem for name in names]
+    lacking = sorted(set(classes) - set(stems) - {s.removeprefix("m") for s in stems})
+    if lacking:
+        more = f" (and {len(lacking) - 1} more)" if len(lacking) > 1 else ""
+        raise UnknownNameError(f"lists model {lacking[0]!r}{more}, which no mesh has")
+
+
+def _relabel(writer: IndexWriter, classes: Mapping[str, str]) -> int:
+    """Queue the classes' labels for the committed entries whose label differs."""
+    from cfsig.index.store import Entry
+
+    names, labels, paths = _committed(writer, "names", "labels", "paths")
+    wanted = labels_from_cla(names, classes)
+    rows = zip(names, labels, paths, wanted, strict=True)
+    return writer.update(Entry(n, w, p) for n, old, p, w in rows if w and w != old)
+
+
+def _prune(writer: IndexWriter, roots: list[str | os.PathLike]) -> int:
+    """Queue the removal of the committed entries whose file under a folder of ``roots`` is
+    gone; return their number."""
+    folders = tuple(os.path.join(os.path.abspath(r), "") for r in roots if Path(r).is_dir())
+    names, paths = _committed(writer, "names", "paths")
+    gone = [
+        name
+        for name, path in zip(names, paths, strict=True)
+        if path.startswith(folders) and not os.path.exists(path)
+    ]
+    writer.remove(gone)
+    return len(gone)
 
 
 def successes(

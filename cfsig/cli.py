@@ -295,6 +295,17 @@ def _report_errors(errors: list[str]) -> None:
     default=200,
     help="Commit to the index after this many meshes (and every 30 s).",
 )
+@click.option(
+    "--classes",
+    type=_FILE,
+    help="Label meshes by a Princeton Shape Benchmark .cla file instead of their folder's name "
+    "(indexed ones too, without recomputing them); those it does not list keep the folder's.",
+)
+@click.option(
+    "--prune",
+    is_flag=True,
+    help="Also drop the entries whose file, under the folders given, no longer exists.",
+)
 def index(
     paths,
     output,
@@ -310,47 +321,71 @@ def index(
     strict,
     partial_cells,
     commit_every,
+    classes,
+    prune,
 ) -> None:
     """Index mesh files and folders (recursively: OFF, OBJ, PLY, STL, glTF, GLB, 3MF, DAE).
 
     The index is a folder, created if needed.
 
     Each mesh is stored under its path relative to the folder given, labelled with the name of
-    the folder that holds it. Running the command again adds new and changed files only.
-    Files that fail are skipped and listed at the end (exit status 3). The index is committed
-    atomically as it grows: after a crash or a kill, running the same command again completes it
-    without recomputing what was committed.
+    the folder that holds it (or its class in --classes). Links to folders and files are
+    followed. Running the command again adds new and changed files only; entries are dropped
+    only with --prune. Files that fail are skipped and listed at the end (exit status 3). The
+    index is committed atomically as it grows: after a crash or a kill, running the same
+    command again completes it without recomputing what was committed.
 
     \b
     Example:
       cfsig index shrec07/ -o shrec07-index --jobs 2
+      cfsig index shrec07/ -o shrec07-index --prune --classes shrec07.cla
       cfsig index /shared/shrec07/ -o shrec07-index --scheduler tcp://10.0.0.5:8786
     """
     if jobs is not None and scheduler is not None:
         raise click.UsageError("give --jobs or --scheduler, not both")
-    from cfsig.batch import index_meshes
+    from cfsig.batch import check_inputs, index_meshes
     from cfsig.descriptors import layout
+    from cfsig.errors import UnknownNameError
     from cfsig.index.store import IndexWriter, existing_params
 
+    cla = _read_classes(classes)
     routes: Counter[str] = Counter()
     try:
+        check_inputs(output, paths, cla)
         params = _params(
             existing_params(output), normalize=normalize, seed=seed, bins=bins, repair=repair,
             descriptor=descriptor, partial_cells=partial_cells,
         )  # fmt: skip
         with IndexWriter(output, params, layout(params)) as writer:
             bar = partial(_progress, what="indexing", routes=routes)
-            added, skipped = index_meshes(
+            done = index_meshes(
                 writer, paths, solver, jobs, scheduler, strict, commit_every, bar,
-                Limits(stage_timeout),
+                Limits(stage_timeout), cla, prune,
             )  # fmt: skip
         total = len(writer)  # after the last commit
+    except UnknownNameError as exc:  # of the classes
+        _fail(f"{classes}: {exc}")
     except CfsigError as exc:
         _fail(str(exc))
-    click.echo(f"{output}: {added} meshes added or updated, {total} in the index")
+    changes = [f"{done.added} meshes added or updated"]
+    changes += [f"{done.updated} relabelled or moved"] if classes or done.updated else []
+    changes += [f"{done.pruned} dropped (their files are gone)"] if prune else []
+    click.echo(f"{output}: {', '.join(changes)}, {total} in the index")
     if routes:
         click.echo(_format_routes(routes))
-    _report_skipped(skipped, strict)
+    _report_skipped(done.failures, strict)
+
+
+def _read_classes(path: Path | None) -> dict[str, str] | None:
+    """The classes of a .cla file given as an option, or exit with one line saying why not."""
+    from cfsig.files.cla import read_cla
+
+    try:
+        return read_cla(path) if path else None
+    except OSError as exc:
+        _fail(f"{path}: {exc.strerror or exc}")
+    except ValueError as exc:  # names the file and line already
+        _fail(str(exc))
 
 
 def _progress(iterable, total: Callable[[], int], what: str, routes: Counter[str]):
@@ -382,7 +417,14 @@ def _format_routes(routes: Counter[str]) -> str:
 
 @main.command()
 @click.argument("index_file", type=_PATH)
-@click.argument("meshes", nargs=-1, required=True, type=_PATH)
+@click.argument("meshes", nargs=-1, type=_PATH)
+@click.option(
+    "--name",
+    "names",
+    multiple=True,
+    help="Query by an indexed entry's stored signature instead of a file, itself left out of "
+    "its results (repeatable).",
+)
 @_count_option("-k", default=20, help="Number of results per query.")
 @_solver_option
 @_stage_timeout_option
@@ -397,8 +439,11 @@ def _format_routes(routes: Counter[str]) -> str:
     is_flag=True,
     help="Each query is a part of a shape (a cut, a scan, holes): find the wholes it belongs to.",
 )
-def query(index_file, meshes, k, solver, stage_timeout, as_json, png, partial) -> None:
+def query(index_file, meshes, names, k, solver, stage_timeout, as_json, png, partial) -> None:
     """Find the k indexed meshes nearest to each query mesh (L1 distance; lf, rigid: their own).
+
+    With --name, the queries are indexed entries, by the signatures stored: no file is read,
+    and each is left out of its own results.
 
     The query signatures are computed with the index's own parameters. With --partial the
     first result is the whole whose curvature at small scales matches the part's best (its
@@ -413,20 +458,28 @@ def query(index_file, meshes, k, solver, stage_timeout, as_json, png, partial) -
     Example:
       cfsig query shrec07-index shrec07/ant/81.off -k 10
       cfsig query shrec07-index shrec07/ant/81.off --png ant.png
+      cfsig query shrec07-index --name ant/81.off
       cfsig query shrec07-index scan.ply --partial
     """
+    if bool(meshes) == bool(names):
+        raise click.UsageError("give MESH files or --name, not both")
+    if names and partial:
+        raise click.UsageError("--partial takes MESH files: parts are not indexed")
     import numpy as np
 
     from cfsig.descriptors.parts import partial_file
     from cfsig.descriptors.signature import signature_file
     from cfsig.index.store import IndexReader
-    from cfsig.search.nearest import query
+    from cfsig.search.nearest import query, query_names
     from cfsig.search.partial import query_part
 
     try:
         with IndexReader(index_file) as reader:
             fits: list[float] = []
-            if partial:
+            if names:
+                results = query_names(reader, list(names), k)
+                meshes = [Path(e.path) for e in reader.entries(reader.find(list(names)))]
+            elif partial:
                 found = [query_part(reader, partial_file(p, reader.params), k) for p in meshes]
                 results, fits = [hits for hits, _ in found], [fit for _, fit in found]
             else:
@@ -456,7 +509,7 @@ def query(index_file, meshes, k, solver, stage_timeout, as_json, png, partial) -
                 rows[0]["partial_distance"] = fit
         click.echo(json.dumps(lists[0] if len(lists) == 1 else lists, indent=2))
         return
-    for i, (path, hits) in enumerate(zip(meshes, results, strict=True)):
+    for i, (path, hits) in enumerate(zip(names or meshes, results, strict=True)):
         click.echo(f"# {path}" + (f"  (partial distance {fits[i]:.4f})" if fits else ""))
         for h in hits:
             click.echo(f"{h.rank:4d}  {h.distance:.4f}  {h.entry.name}  {h.entry.label}")
@@ -555,14 +608,8 @@ def evaluate(
     if len(wanted) > 1 and report_dir:
         raise click.UsageError("--report takes one descriptor")
     from cfsig.evaluation.collections import collection_from_index, evaluate_collections
-    from cfsig.files.cla import read_cla
 
-    try:
-        cla = read_cla(classes) if classes else None
-    except OSError as exc:
-        _fail(f"{classes}: {exc.strerror or exc}")
-    except ValueError as exc:  # names the file and line already
-        _fail(str(exc))
+    cla = _read_classes(classes)
     skipped: list[str] = []
     routes: dict[str, Counter[str]] = {}  # per descriptor: their repair modes may differ
     collections: dict[str, Collection] = {}
@@ -719,6 +766,144 @@ def check(index_file) -> None:
             click.echo(f"  {line}", err=True)
         sys.exit(EXIT_ERROR)
     click.echo(f"{index_file}: healthy ({rows} entries in {segments} segment(s))")
+
+
+@main.command()
+@click.argument("index_file", type=_PATH)
+@click.argument("names", nargs=-1, required=True)
+def remove(index_file, names) -> None:
+    """Drop the named entries from an index, atomically.
+
+    Queries stop finding them at once; their rows leave the disk at the next compaction. A name
+    that is not in the index is an error, and nothing is removed.
+
+    \b
+    Example:
+      cfsig remove shrec07-index ant/81.off ant/82.off
+    """
+    from cfsig.index.store import IndexWriter, read_manifest
+
+    try:
+        with IndexWriter(index_file, read_manifest(Path(index_file)).params) as writer:
+            writer.remove(names)
+        total = len(writer)
+    except CfsigError as exc:
+        _fail(str(exc))
+    click.echo(f"{index_file}: {len(set(names))} entries removed, {total} in the index")
+
+
+@main.command()
+@click.argument("index_file", type=_PATH)
+@_json_option
+def info(index_file, as_json) -> None:
+    """What an index holds: its descriptor and parameters, entries per class, size, version.
+
+    Reads the manifest and the sizes of the files only.
+
+    \b
+    Example:
+      cfsig info shrec07-index
+    """
+    from cfsig.index.store import index_info
+
+    try:
+        facts = index_info(index_file).to_dict()
+    except CfsigError as exc:
+        _fail(str(exc))
+    if as_json:
+        click.echo(json.dumps(facts, indent=2))
+        return
+    params = ", ".join(f"{k}={v}" for k, v in facts["params"].items() if k != "descriptor")
+    lines = [
+        f"index          {facts['index']}",
+        f"descriptor     {facts['descriptor']} ({params})",
+        f"partial cells  {'kept' if facts['partial_cells'] else 'no'}",
+        f"entries        {facts['rows']} in {len(facts['classes'])} classes",
+        f"segments       {facts['segments']}, {facts['bytes']:,} bytes on disk",
+        f"written by     cfsig {facts['cfsig_version']}, last committed {facts['committed']}",
+        "classes:",
+        *(f"  {label or '(none)':<24}{count:>8}" for label, count in facts["classes"].items()),
+    ]
+    click.echo("\n".join(lines))
+
+
+@main.command()
+@click.argument("index_file", type=_PATH)
+@click.option(
+    "--below",
+    type=click.FloatRange(min=0, min_open=True),
+    help="Join entries closer than this [0.43, for the intrinsic descriptor; others: give it].",
+)
+@click.option(
+    "--top", type=click.IntRange(min=1), help="Instead: list each entry's K nearest others."
+)
+@_json_option
+def duplicates(index_file, below, top, as_json) -> None:
+    """Near-duplicates of a whole index: groups of entries closer than a distance.
+
+    Every entry is a query against the index, by the search `query` makes (pruned, exact),
+    streamed with bounded memory; a progress bar runs on standard error. Entries join a group
+    when they are closer than --below, directly or through others of the group. The default
+    finds copies of one model re-saved, moved, rotated and scaled (docs/guide.md says how it
+    was chosen). With --top K, prints each entry's K nearest others instead, as they come.
+
+    \b
+    Example:
+      cfsig duplicates shrec07-index
+      cfsig duplicates shrec07-index --top 10 --json > neighbours.json
+    """
+    from tqdm import tqdm
+
+    from cfsig.index.store import IndexReader
+    from cfsig.search.duplicates import BELOW, duplicate_groups, nearest_all
+
+    if top and below:
+        raise click.UsageError("give --below or --top, not both")
+    try:
+        with IndexReader(index_file) as reader:
+            if below is None and not top and reader.params.descriptor != Params().descriptor:
+                raise click.UsageError(
+                    f"the default --below is for {Params().descriptor}: give one for "
+                    f"{reader.params.descriptor}"
+                )
+            with tqdm(total=len(reader), unit="mesh", file=sys.stderr, leave=False) as bar:
+                if top:
+                    _print_neighbours(nearest_all(reader, top, bar.update), as_json)
+                    return
+                groups = duplicate_groups(reader, below or BELOW, bar.update)
+    except CfsigError as exc:
+        _fail(str(exc))
+    if as_json:
+        out = [
+            {"distance": g.distance, "names": [e.name for e in g.entries],
+             "labels": [e.label for e in g.entries]}
+            for g in groups
+        ]  # fmt: skip
+        click.echo(json.dumps(out, indent=2))
+        return
+    for i, group in enumerate(groups, 1):
+        click.echo(f"# group {i}: {len(group.entries)} entries, joined below {group.distance:.4f}")
+        for entry in group.entries:
+            click.echo(f"{entry.name}  {entry.label}")
+    click.echo(f"{index_file}: {len(groups)} groups of near-duplicates")
+
+
+def _print_neighbours(found, as_json: bool) -> None:
+    """Print each entry's nearest others as they come: text, or one JSON list written as it
+    grows."""
+    if as_json:
+        click.echo("[")
+    for i, (entry, hits) in enumerate(found):
+        if as_json:
+            near = [{"rank": h.rank, "distance": h.distance, "name": h.entry.name} for h in hits]
+            item = json.dumps({"name": entry.name, "label": entry.label, "nearest": near})
+            click.echo(("," if i else "") + item)
+            continue
+        click.echo(f"# {entry.name}")
+        for h in hits:
+            click.echo(f"{h.rank:4d}  {h.distance:.4f}  {h.entry.name}  {h.entry.label}")
+    if as_json:
+        click.echo("]")
 
 
 @main.command()

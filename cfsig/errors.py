@@ -31,3 +31,11 @@ class StageLimitError(MeshError):
 
 class PartialError(CfsigError):
     """A partial query was asked of an index whose descriptor has no channel for it."""
+
+
+class UnknownNameError(CfsigError):
+    """A name asked of an index is not one of its entries."""
+
+
+class EmptyPathError(CfsigError):
+    """A folder given to index holds no mesh file."""

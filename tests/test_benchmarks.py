@@ -111,9 +111,13 @@ def test_messy(data, tmp_path):
 
 
 def test_index_scale(tmp_path):
-    out = run("index_scale.py", "--dir", tmp_path, "--sizes", 2000, "--repeat", 2)
+    args = ["--dir", tmp_path, "--sizes", 2000, "--repeat", 2, "--duplicates"]
+    out = run("index_scale.py", *args)
     assert "| rows | rows now | build | commit of 1,000 rows s (median) | max | query s |" in out
-    assert re.search(rf"\| 2,000 \| 4,000 \| \d+ s \| {NUMBER} \| {NUMBER} \| {NUMBER} \|", out)
+    assert "| `cfsig info` s | removal of 1,000 rows s (median) | max |" in out
+    # two commits of 1,000 rows, then two removals of 1,000
+    numbers = rf"( {NUMBER} \|){{6}} \d+ \(\d+ CPU\) \|"
+    assert re.search(rf"\| 2,000 \| 2,000 \| \d+ s \|{numbers}", out)
 
 
 def test_peers(data, tmp_path):

@@ -2,6 +2,7 @@
 
 import fcntl
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -154,3 +155,56 @@ def test_unusable_index_one_line_error(meshes, tmp_path, kind, build_index):
     if kind == "params":
         result = CliRunner().invoke(main, ["index", str(mesh), "-o", str(index), "--seed", "0"])
         assert result.exit_code == 1 and "other parameters" in result.output
+
+
+_REMOVE = """
+import sys
+from cfsig.index.store import IndexWriter, read_manifest
+from pathlib import Path
+index = Path(sys.argv[1])
+print("ready", flush=True)
+with IndexWriter(index, read_manifest(index).params) as writer:
+    writer.remove(sys.argv[2:])
+"""
+
+
+def test_sigkill_during_a_removal_leaves_it_undone_or_done(tmp_path):
+    base = tmp_path / "base"
+    with open_writer(base, merge=False) as writer:  # in seven segments
+        for i in range(1400):
+            writer.add(Entry(f"c/{i}.off", f"c{i % 3}", f"/c/{i}.off"), random_signature(i))
+            if i % 200 == 199:
+                writer.commit()
+    every = set(_rows(base))
+    gone = [f"c/{i}.off" for i in range(0, 1400, 7)]
+
+    def start(index):
+        command = [sys.executable, "-c", _REMOVE, str(index), *gone]
+        proc = subprocess.Popen(command, stdout=subprocess.PIPE)
+        assert proc.stdout.readline() == b"ready\n"
+        return proc
+
+    took = []  # how long the removal takes once the interpreter has started
+    for _ in range(3):
+        index = tmp_path / "timed"
+        shutil.rmtree(index, ignore_errors=True)
+        shutil.copytree(base, index)
+        proc = start(index)
+        begin = time.monotonic()
+        assert proc.wait() == 0
+        took.append(time.monotonic() - begin)
+    assert set(_rows(index)) == every - set(gone)
+    rng, outcomes = np.random.default_rng(0), []
+    for attempt in range(50):
+        index = tmp_path / f"killed-{attempt}"
+        shutil.copytree(base, index)
+        proc = start(index)
+        time.sleep(rng.uniform(0, max(took)))
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        assert check_index(index) == []
+        names = set(_rows(index))
+        assert names in (every, every - set(gone))  # all of it or none of it
+        outcomes.append(names == every)
+        shutil.rmtree(index)
+    assert 0 < sum(outcomes) < 50  # some kills came before the commit, some after

@@ -217,11 +217,12 @@ def _format_1(path):
         f.create_dataset("signatures", data=np.zeros((2, 200), np.float32))
 
 
-def _format_2(folder, params):
-    """An index folder of format 2, as cfsig 0.1 wrote them, made with ``params``."""
+def _format_2(folder, params, version=2):
+    """An index folder of format 2 (or ``version``), as cfsig 0.1 wrote them, made with
+    ``params``."""
     folder.mkdir()
     with h5py.File(folder / "manifest.h5", "w") as f:
-        f.attrs.update(format="cfsig-index", format_version=2, params=json.dumps(params))
+        f.attrs.update(format="cfsig-index", format_version=version, params=json.dumps(params))
 
 
 V10 = {"descriptor": "cfhks", "version": 10, "bins": 200, "repair": "auto"}
@@ -233,8 +234,9 @@ V10 = {"descriptor": "cfhks", "version": 10, "bins": 200, "repair": "auto"}
         (_format_1, "descriptor cf that"),
         (lambda path: _format_2(path, V10), "descriptor cfhks version 10"),
         (lambda path: _format_2(path, dict(V10, descriptor="cf", version=1)), "cf version 1"),
+        (lambda path: _format_2(path, json.loads(Params().to_json()), 3), "in index format 3"),
     ],
-    ids=["format 1", "format 2, a removed version", "format 2, cf"],
+    ids=["format 1", "format 2, a removed version", "format 2, cf", "format 3"],
 )
 def test_older_indexes_are_refused_with_the_command_that_rebuilds_them(tmp_path, make, named):
     old = tmp_path / "old"

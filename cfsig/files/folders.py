@@ -18,8 +18,9 @@ def find_meshes(paths: Iterable[str | os.PathLike]) -> Iterator[tuple[Path, str]
     """Mesh files under some files and folders, in a stable order, with their names.
 
     Folders are walked recursively (sorted, hidden entries skipped) for the `MESH_SUFFIXES`
-    files; a file given directly is taken whatever its extension, so that reading it reports
-    what is wrong with it.
+    files, following symbolic links to folders and files; a folder reached again (through a
+    link cycle, or two links to it) is walked once. A file given directly is taken whatever its
+    extension, so that reading it reports what is wrong with it.
 
     Parameters
     ----------
@@ -38,7 +39,13 @@ def find_meshes(paths: Iterable[str | os.PathLike]) -> Iterator[tuple[Path, str]
         if not root.is_dir():
             yield root, root.name
             continue
-        for folder, dirs, files in os.walk(root):
+        seen: set[tuple[int, int]] = set()  # (device, inode) of the folders walked
+        for folder, dirs, files in os.walk(root, followlinks=True):
+            status = os.stat(folder)
+            if (status.st_dev, status.st_ino) in seen:
+                dirs[:] = []
+                continue
+            seen.add((status.st_dev, status.st_ino))
             dirs[:] = sorted(d for d in dirs if not d.startswith("."))
             for file in sorted(files):
                 if Path(file).suffix.lower() in MESH_SUFFIXES and not file.startswith("."):

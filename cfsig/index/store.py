@@ -1,13 +1,14 @@
 """The index: a folder of immutable segment files behind a small manifest replaced atomically.
 
-Layout (format version 3, docs/index-format.md): ``INDEX/manifest.h5`` holds the header
+Layout (format version 4, docs/index-format.md): ``INDEX/manifest.h5`` holds the header
 (``format`` "cfsig-index", ``format_version``, ``params`` and ``layout`` as JSON,
-``cfsig_version``) and the
+``cfsig_version``, the time of the commit, the count of rows of each class) and the
 list of segments with their row counts and file checksums; each ``INDEX/seg-NNNNNNNN.h5``
 (`cfsig.index.segments`) holds the rows of one commit, or of several merged by compaction. A commit
 writes one new segment, syncs it to disk and renames a new manifest over the old one: it costs
 the rows it adds, whatever the size of the index. A name added again supersedes its older row,
-which readers skip until compaction drops it. Segments pile up and are merged eight at a time
+which readers skip until compaction drops it; a removal is a commit of a segment without rows
+that drops the rows removed. Segments pile up and are merged eight at a time
 (`MERGE_FANOUT`), so a row is copied a few times in its life, not at every commit.
 
 A process killed at any moment leaves the manifest of the previous or of the new commit; files
@@ -27,8 +28,10 @@ import math
 import os
 import shutil
 import zlib
+from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import IO, NoReturn, Protocol
 
@@ -36,7 +39,7 @@ import h5py
 import numpy as np
 
 from cfsig import __version__
-from cfsig.errors import IndexFileError
+from cfsig.errors import IndexFileError, UnknownNameError
 from cfsig.index.segments import (
     CELLS,
     COLUMNS,
@@ -55,7 +58,7 @@ from cfsig.index.sketch import Sketch
 from cfsig.params import Layout, Params
 
 FORMAT = "cfsig-index"
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 MANIFEST = "manifest.h5"
 LOCK = "lock"
 REBUILD = "rebuild it: cfsig index FOLDER -o NEW_INDEX"
@@ -145,12 +148,21 @@ class Manifest:
         Oldest first; rows are numbered segment after segment.
     next_id : int
         Number of the next segment to write.
+    classes : tuple of (str, int)
+        Each label of the rows not superseded and its count, sorted by label.
+    committed : str
+        When this manifest was written: ISO 8601, UTC, to the second.
+    version : str
+        The cfsig version that wrote it.
     """
 
     params: Params
     layout: Layout
     segments: tuple[SegmentInfo, ...]
     next_id: int
+    classes: tuple[tuple[str, int], ...] = ()
+    committed: str = ""
+    version: str = __version__
 
 
 @dataclass(frozen=True)
@@ -234,6 +246,7 @@ class IndexReader:
         )
         self.params, self.layout = manifest.params, manifest.layout
         self.signatures = Signatures(self)
+        self._keys: list[_Keys] | None = None
 
     def _open(self) -> tuple[Manifest, list[SegmentView]]:
         """Open the manifest and its segments."""
@@ -321,6 +334,38 @@ class IndexReader:
         for where, values in parts:
             out[where] = values
         return out
+
+    def find(self, names: list[str]) -> np.ndarray:
+        """Row numbers of some entries, by name (reading 12 bytes a row once, then the names
+        whose keys match).
+
+        Parameters
+        ----------
+        names : list of str
+            Entry names.
+
+        Returns
+        -------
+        rows : (len(names),) int64
+
+        Raises
+        ------
+        UnknownNameError
+            A name is not in the index.
+        """
+        if self._keys is None:
+            self._keys = [_Keys.read(v.signatures.file, v.dead) for v in self.segments]
+        views = self.segments
+        tables = [
+            (i, v.signatures.file, keys)
+            for i, (v, keys) in enumerate(zip(views, self._keys, strict=True))
+        ]
+        found = find_names(names, tables)
+        missing = [n for n, at in zip(names, found, strict=True) if at is None]
+        if missing:
+            raise UnknownNameError(_unknown(self.path, missing))
+        physical = [views[i].start + row for i, row in found]  # type: ignore[misc]
+        return self.logical_rows(np.array(physical, np.int64))
 
     def entries(self, rows: np.ndarray) -> list[Entry]:
         """Names, labels and paths of some rows, reading only those rows.
@@ -450,7 +495,7 @@ class IndexWriter:
         self.params = params
         self.merge = merge
         if layout is not None and not self.path.exists():
-            _create(self.path, Manifest(params, layout, (), 1))
+            _create(self.path, Manifest(params, layout, (), 1, committed=_now()))
         self._lock = _acquire_lock(self.path)
         try:
             if (self.path / MANIFEST).exists():
@@ -466,13 +511,14 @@ class IndexWriter:
             elif layout is None:
                 raise ValueError(f"{self.path}: a new index needs its descriptor's layout")
             else:  # an empty folder made an index
-                self._manifest = Manifest(params, layout, (), 1)
+                self._manifest = Manifest(params, layout, (), 1, committed=_now())
                 self._remove_orphans()  # of a writer killed before its first manifest
                 write_manifest(self.path, self._manifest)
         except BaseException:
             self._lock.close()
             raise
         self._pending: list[tuple[Entry, Signature]] = []
+        self._removals: dict[str, tuple[int, int]] = {}  # name -> its committed (segment, row)
         self._keys: dict[int, _Keys] | None = None
         self._files: dict[int, h5py.File] = {}
 
@@ -550,6 +596,65 @@ class IndexWriter:
         if len(signature.vector) != self.layout.length:
             raise ValueError(f"{entry.name}: a vector of {len(signature.vector)} entries")
         self._pending.append((entry, signature))
+        self._removals.pop(entry.name, None)
+
+    def remove(self, names: Iterable[str]) -> None:
+        """Queue the removal of some entries for the next commit, which drops their rows.
+
+        A removal is committed like an addition: atomically, by a segment without rows that
+        drops them. Queries stop seeing the rows at once; `compact` deletes them from disk.
+
+        Parameters
+        ----------
+        names : iterable of str
+            Entry names, committed or queued.
+
+        Raises
+        ------
+        UnknownNameError
+            A name is not in the index: nothing is queued.
+        """
+        names = list(dict.fromkeys(names))
+        queued = {entry.name for entry, _ in self._pending}
+        found = self._find(names)
+        missing = [n for n, at in zip(names, found, strict=True) if at is None and n not in queued]
+        if missing:
+            raise UnknownNameError(_unknown(self.path, missing))
+        gone = set(names)
+        self._pending = [(e, s) for e, s in self._pending if e.name not in gone]
+        self._removals.update((n, at) for n, at in zip(names, found, strict=True) if at is not None)
+
+    def update(self, entries: Iterable[Entry]) -> int:
+        """Queue new labels or paths for committed entries, their signatures copied as stored.
+
+        Parameters
+        ----------
+        entries : iterable of Entry
+            Each names a committed entry and gives its label and path.
+
+        Returns
+        -------
+        changed : int
+            Entries whose label or path differed, queued for the next commit; the others are
+            left as they are.
+
+        Raises
+        ------
+        UnknownNameError
+            A name is not committed in the index: nothing is queued.
+        """
+        entries = list(entries)
+        found = self._find([e.name for e in entries])
+        missing = [e.name for e, at in zip(entries, found, strict=True) if at is None]
+        if missing:
+            raise UnknownNameError(_unknown(self.path, missing))
+        changed = 0
+        for entry, (segment, row) in zip(entries, found, strict=True):  # type: ignore[misc]
+            f = self._file(segment)
+            if (f["labels"].asstr()[row], f["paths"].asstr()[row]) != (entry.label, entry.path):
+                self.add(entry, _Stored.read(f, row, self.layout.cells))
+                changed += 1
+        return changed
 
     @property
     def pending(self) -> int:
@@ -557,18 +662,24 @@ class IndexWriter:
         return len(self._pending)
 
     def commit(self) -> None:
-        """Write the queued records as one new segment and publish it (fsync, rename).
+        """Write the queued records and removals as one new segment and publish it (fsync,
+        rename).
 
         Then merges segments if enough of one size class have piled up (see `merge`).
         """
         latest = {entry.name: (entry, sig) for entry, sig in self._pending}
-        if not latest:
+        if not latest and not self._removals:
             return
-        found = self._find(list(latest))
+        found = [*self._find(list(latest)), *self._removals.values()]
         drops = np.array([loc for loc in found if loc is not None], np.int64).reshape(-1, 2)
+        classes = Counter(dict(self._manifest.classes))
+        classes.update(entry.label for entry, _ in latest.values())
+        classes.subtract(self._labels(drops))
+        counts = tuple(sorted((k, v) for k, v in classes.items() if v > 0))
         piece = _piece(list(latest.values()), self.layout)
-        self._write([piece], len(latest), drops, len(self.segments))
+        self._write([piece], len(latest), drops, len(self.segments), counts)
         self._pending.clear()
+        self._removals.clear()
         if self.merge:
             while (start := _merge_start(self.segments)) is not None:
                 self._merge(start)
@@ -595,16 +706,32 @@ class IndexWriter:
         drops = np.concatenate([np.zeros((0, 2), np.int64), *kept])
         drops = drops[~np.isin(drops[:, 0], list(inside))]  # rows of older segments stay dropped
         pieces = (p for s in run for p in scan_segment(self._file(s.id), dead[s.id]))
-        self._write(pieces, sum(s.live for s in run), drops, start, new=False)
+        self._write(pieces, sum(s.live for s in run), drops, start)
+
+    def _labels(self, drops: np.ndarray) -> list[str]:
+        """The labels of some committed rows, (d, 2) (segment, row), each named once."""
+        labels: list[str] = []
+        for segment in np.unique(drops[:, 0]):
+            rows = np.sort(drops[drops[:, 0] == segment, 1])
+            data = self._file(int(segment))["labels"].asstr()
+            dense = len(rows) * 8 > data.shape[0]  # one read of the column beats many rows
+            labels += list(data[:][rows] if dense else data[rows])
+        return labels
 
     def _write(
-        self, pieces: Iterable[Piece], rows: int, drops: np.ndarray, start: int, new: bool = True
+        self,
+        pieces: Iterable[Piece],
+        rows: int,
+        drops: np.ndarray,
+        start: int,
+        classes: tuple[tuple[str, int], ...] | None = None,
     ) -> None:
         """Write a segment and publish a manifest where it replaces the segments from ``start``.
 
-        ``drops`` are the rows of older segments it supersedes: newly (a commit), or already
-        (a merge, which carries them over).
+        ``drops`` are the rows of older segments it supersedes: newly (a commit, which gives
+        the ``classes`` they leave), or already (a merge, which carries them over).
         """
+        new = classes is not None
         old = self._manifest
         info = SegmentInfo(old.next_id, rows, rows, 0)
         path = self.path / info.file
@@ -615,7 +742,10 @@ class IndexWriter:
             ids, dropped = np.unique(drops[:, 0] if new else [], return_counts=True)
             counts = {int(s): int(n) for s, n in zip(ids, dropped, strict=True)}
             older = [replace(s, live=s.live - counts.get(s.id, 0)) for s in old.segments[:start]]
-            manifest = Manifest(self.params, old.layout, (*older, info), info.id + 1)
+            manifest = replace(
+                old, segments=(*older, info), next_id=info.id + 1, committed=_now(),
+                classes=old.classes if classes is None else classes, version=__version__,
+            )  # fmt: skip
             write_manifest(self.path, manifest)
         except BaseException:
             path.unlink(missing_ok=True)
@@ -642,20 +772,8 @@ class IndexWriter:
             self._keys = {
                 s.id: _Keys.read(f, dead[s.id]) for s, f in zip(self.segments, files, strict=True)
             }
-        keys = name_keys(names)
-        found: list[tuple[int, int] | None] = [None] * len(names)
-        for s in reversed(self.segments):
-            table = self._keys[s.id]
-            low = np.searchsorted(table.sorted, keys, "left")
-            high = np.searchsorted(table.sorted, keys, "right")
-            for i in np.flatnonzero(high > low):
-                if found[i] is not None:
-                    continue
-                for row in table.rows[low[i] : high[i]]:
-                    named = self._file(s.id)["names"].asstr()[int(row)]
-                    if row not in table.dead and named == names[i]:
-                        found[i] = (s.id, int(row))
-        return found
+        keys = self._keys
+        return find_names(names, [(s.id, self._file(s.id), keys[s.id]) for s in self.segments])
 
     def _file(self, segment: int) -> h5py.File:
         """An open segment, kept open while the writer lives."""
@@ -683,6 +801,79 @@ class _Keys:
     @classmethod
     def read(cls, f: h5py.File, dead: Iterable[int] = ()) -> _Keys:
         return cls(f["key_sorted"][:], f["key_rows"][:], set(map(int, dead)))
+
+
+def find_names(
+    names: list[str], tables: list[tuple[int, h5py.File, _Keys]]
+) -> list[tuple[int, int] | None]:
+    """Where some names are among segments: by their keys, then their stored names.
+
+    Parameters
+    ----------
+    names : list of str
+        Entry names.
+    tables : list of (int, h5py.File, _Keys)
+        Each segment's number, open file and keys, oldest first.
+
+    Returns
+    -------
+    found : list of (int, int) or None
+        The segment number and row of each name's row not superseded, or None.
+    """
+    keys = name_keys(names)
+    found: list[tuple[int, int] | None] = [None] * len(names)
+    for segment, f, table in reversed(tables):
+        low = np.searchsorted(table.sorted, keys, "left")
+        high = np.searchsorted(table.sorted, keys, "right")
+        pairs = [
+            (int(i), int(row))
+            for i in np.flatnonzero(high > low)
+            if found[i] is None
+            for row in table.rows[low[i] : high[i]]
+            if row not in table.dead
+        ]
+        if not pairs:
+            continue
+        rows = np.unique([row for _, row in pairs])  # read at once, in order
+        stored = dict(zip(rows.tolist(), f["names"].asstr()[rows], strict=True))
+        for i, row in pairs:
+            if stored[row] == names[i]:
+                found[i] = (segment, row)
+    return found
+
+
+@dataclass(frozen=True)
+class _Stored:
+    """A committed row's signature as `Signature` gives it, to copy it under a new label."""
+
+    vector: np.ndarray
+    cells: tuple[np.ndarray, np.ndarray] | None
+    sha256: str
+    n_vertices: int
+    n_faces: int
+    n_components: int
+    phi_range: tuple[float, float]
+    curvature_error: float
+
+    @classmethod
+    def read(cls, f: h5py.File, row: int, slots: int) -> _Stored:
+        cells = (f["cells"][row], f["cell_fractions"][row]) if slots else None
+        return cls(
+            f["signatures"][row], cells, bytes(f["sha256"][row]).decode(),
+            int(f["n_vertices"][row]), int(f["n_faces"][row]), int(f["n_components"][row]),
+            (float(f["phi_min"][row]), float(f["phi_max"][row])), float(f["curvature_error"][row]),
+        )  # fmt: skip
+
+
+def _unknown(path: Path, names: list[str]) -> str:
+    """The one line refusing names an index lacks."""
+    more = f" (and {len(names) - 1} more)" if len(names) > 1 else ""
+    return f"{path}: no entry named {names[0]!r}{more}"
+
+
+def _now() -> str:
+    """The time now, UTC, ISO 8601 to the second."""
+    return datetime.now(timezone.utc).replace(microsecond=0).isoformat()
 
 
 def read_manifest(path: Path) -> Manifest:
@@ -720,9 +911,12 @@ def read_manifest(path: Path) -> Manifest:
                 layout,
                 tuple(SegmentInfo(*map(int, row)) for row in zip(*columns, strict=True)),
                 int(f.attrs["next_segment"]),
+                tuple(sorted(json.loads(f.attrs["classes"]).items())),
+                str(f.attrs["committed"]),
+                str(f.attrs["cfsig_version"]),
             )
             crc = int(f.attrs["crc32"])
-        except (KeyError, ValueError, OSError) as exc:
+        except (KeyError, ValueError, OSError, AttributeError) as exc:
             raise IndexFileError(f"{path}: unreadable manifest ({exc})") from None
     if crc != _manifest_crc(manifest):
         raise IndexFileError(f"{path}: the manifest is damaged (checksum mismatch)")
@@ -770,7 +964,9 @@ def write_manifest(path: Path, manifest: Manifest) -> None:
             format_version=FORMAT_VERSION,
             params=manifest.params.to_json(),
             layout=manifest.layout.to_json(),
-            cfsig_version=__version__,
+            cfsig_version=manifest.version,
+            committed=manifest.committed,
+            classes=json.dumps(dict(manifest.classes)),
             next_segment=manifest.next_id,
             crc32=np.uint32(_manifest_crc(manifest)),
         )
@@ -795,6 +991,9 @@ def _manifest_crc(manifest: Manifest) -> int:
             manifest.layout.to_json(),
             manifest.next_id,
             [list(vars(s).values()) for s in manifest.segments],
+            manifest.classes,
+            manifest.committed,
+            manifest.version,
         ]
     )
     return zlib.crc32(text.encode())
@@ -902,13 +1101,126 @@ def check_index(path: str | os.PathLike) -> list[str]:
     if not problems:
         files = _open_segments(path, manifest.segments)
         try:
-            _dead_rows(manifest.segments, files, path)
+            problems += _check_drops(manifest.segments, files, path)
+            dead = _dead_rows(manifest.segments, files, path)
+            if not problems:  # every drop names a row: the live rows are known
+                labels = [
+                    np.delete(f["labels"].asstr()[:], dead[s.id])
+                    for s, f in zip(manifest.segments, files, strict=True)
+                ]
+                counted = Counter(str(label) for part in labels for label in part)
+                if tuple(sorted(counted.items())) != manifest.classes:
+                    problems.append(f"{path / MANIFEST}: its class counts do not match the rows")
         except IndexFileError as exc:
             problems.append(str(exc))
         finally:
             for f in files:
                 f.close()
     return problems
+
+
+def _check_drops(
+    segments: tuple[SegmentInfo, ...], files: list[h5py.File], path: Path
+) -> list[str]:
+    """Problems of the drops: each must name a row of an older segment, and once in all."""
+    problems: list[str] = []
+    held: dict[int, int] = {}
+    seen: set[tuple[int, int]] = set()
+    for info, f in zip(segments, files, strict=True):
+        for segment, row in f["drops"][:].tolist():
+            if segment not in held or not 0 <= row < held[segment]:
+                problems.append(f"{path / info.file}: drops a row that is not in an older segment")
+                break
+            if (segment, row) in seen:
+                problems.append(f"{path / info.file}: drops a row already dropped")
+                break
+            seen.add((segment, row))
+        held[info.id] = info.rows
+    return problems
+
+
+@dataclass(frozen=True)
+class IndexInfo:
+    """What an index holds, as its manifest says.
+
+    Attributes
+    ----------
+    path : Path
+        The index folder.
+    params : Params
+        The parameters of its signatures, the descriptor among them.
+    layout : Layout
+        What it keeps per row; ``layout.cells`` > 0: fine curvature cells for partial queries.
+    rows : int
+        Entries.
+    classes : dict of str to int
+        Each label and its number of entries, sorted by label.
+    segments : int
+        Segment files.
+    bytes : int
+        Size of its files on disk, the manifest's and the segments'.
+    version : str
+        The cfsig version that wrote its manifest.
+    committed : str
+        When its manifest was written: ISO 8601, UTC.
+    """
+
+    path: Path
+    params: Params
+    layout: Layout
+    rows: int
+    classes: dict[str, int]
+    segments: int
+    bytes: int
+    version: str
+    committed: str
+
+    def to_dict(self) -> dict:
+        """The facts as JSON-ready values (what ``cfsig info --json`` prints)."""
+        return {
+            "index": str(self.path),
+            "descriptor": self.params.descriptor,
+            "params": json.loads(self.params.to_json()),
+            "rows": self.rows,
+            "classes": self.classes,
+            "segments": self.segments,
+            "bytes": self.bytes,
+            "cfsig_version": self.version,
+            "committed": self.committed,
+            "partial_cells": self.layout.cells > 0,
+        }
+
+
+def index_info(path: str | os.PathLike) -> IndexInfo:
+    """What an index holds, from its manifest and the sizes of its files: no row is read.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The index folder.
+
+    Returns
+    -------
+    info : IndexInfo
+
+    Raises
+    ------
+    IndexFileError
+        Not an index this cfsig reads, a damaged manifest, or a segment file missing.
+    """
+    path = Path(path)
+    manifest = read_manifest(path)
+    size = (path / MANIFEST).stat().st_size
+    for info in manifest.segments:
+        try:
+            size += (path / info.file).stat().st_size
+        except OSError:
+            raise IndexFileError(f"{path}: segment {info.file} is missing") from None
+    return IndexInfo(
+        path, manifest.params, manifest.layout, sum(s.live for s in manifest.segments),
+        dict(manifest.classes), len(manifest.segments), size, manifest.version,
+        manifest.committed,
+    )  # fmt: skip
 
 
 def compact_index(path: str | os.PathLike) -> tuple[int, int]:
@@ -1055,7 +1367,7 @@ def _check_header(f: h5py.File, path: Path) -> tuple[Params, Layout]:
             f"{path}: index format {version} is newer than this cfsig reads ({FORMAT_VERSION})"
         )
     if version < FORMAT_VERSION:
-        raise IndexFileError(f"{path}: {_made_by(f.attrs.get('params'))}; {REBUILD}")
+        raise IndexFileError(f"{path}: {_made_by(f.attrs.get('params'), version)}; {REBUILD}")
     try:
         return Params.from_json(f.attrs["params"]), Layout.from_json(f.attrs["layout"])
     except (KeyError, TypeError, ValueError) as exc:
@@ -1070,8 +1382,10 @@ def _not_a_folder(path: Path) -> NoReturn:
     raise IndexFileError(f"{path}: the manifest of an index: name its folder")
 
 
-def _made_by(params: object) -> str:
+def _made_by(params: object, version: int) -> str:
     """What an index of an older format was made with, in words, from its stored parameters."""
+    if version >= 3:  # format 3 differs in its manifest only: its descriptors are today's
+        return f"made by an older cfsig, in index format {version}"
     try:
         data = json.loads(str(params))
         descriptor = str(data.get("descriptor", "cf"))

@@ -36,6 +36,13 @@ _FIRST = 1024  # rows of smallest bounds evaluated first per query (at least 4 k
 _SAMPLE = 65536  # bounds sampled to find the cutoff of those rows
 _SCAN_RATIO = 4  # a full scan when the candidates are a quarter of the rows or more
 _EXACT_BATCH = 64  # rows of smallest bounds whose exact distances are computed at a time
+# Queries from which a group is searched together, block by block (`_Pruned._many`): a group of
+# as many reads the rows twice for all, fewer reads a query than one query at a time up to
+# about 500,000 rows (groups of 64 or more; docs/method.md).
+_MANY = 64
+_FIRST_MANY = 64  # rows of smallest bounds evaluated first per query there (at least 4 k)
+_SAMPLE_MANY = 8192  # bounds per query sampled there to find the cutoff of those rows
+_PAIR_BLOCKS = 4  # blocks read at a time there for all the queries (4 chunks: 13 MB at 812)
 
 
 @dataclass(frozen=True)
@@ -247,7 +254,11 @@ class _Pruned:
             _scan(self.views, queries, self.kernel, self.best, 0)
             return
         n = len(self.excluded)
-        group = max(1, _BOUND_CELLS // n)
+        group = max(1, _BOUND_CELLS // n)  # as `group_size`
+        if min(len(queries), group) >= _MANY:
+            for q0 in range(0, len(queries), group):
+                self._many(q0, queries[q0 : q0 + group])
+            return
         sketch_kernel = choose_kernel(len(queries) * self.live)
         for q0 in range(0, len(queries), group):
             some = queries[q0 : q0 + group]
@@ -260,9 +271,84 @@ class _Pruned:
             for j, rows in enumerate(left):
                 self._refine(q0 + j, some[j], bounds[j], rows)
 
-    def _bounds(self, queries: np.ndarray, kernel: Kernel) -> np.ndarray:
-        """(q, physical rows) lower bounds of the float32 distances (others left unset)."""
-        bounds = np.empty((len(queries), len(self.excluded)), np.float32)
+    def _many(self, q0: int, queries: np.ndarray) -> None:
+        """Merge the nearest rows of queries ``q0...`` into ``best``, all of them together.
+
+        Many queries share each read of a block: the exact distances of each query's
+        `_FIRST_MANY` rows of smallest bounds are computed first, then those of every row its
+        k-th best distance does not rule out, a block at a time for all the queries.
+        """
+        bounds = self._bounds(queries, choose_kernel(len(queries) * self.live), by_row=True)
+        bounds[self.excluded] = np.inf
+        # About `_FIRST_MANY` rows a query: those whose bound is at most a cutoff estimated
+        # from a sample of the bounds, twice as many as needed; the k-th best bounds the rest.
+        step = max(1, len(bounds) // _SAMPLE_MANY)
+        sample = np.ascontiguousarray(bounds[::step].T)
+        nth = min(-(-2 * max(_FIRST_MANY, 4 * self.best.k) // step), sample.shape[1]) - 1
+        cutoffs = np.partition(sample, nth, axis=1)[:, nth]
+        picked = ~(bounds > cutoffs)
+        picked[self.excluded] = False
+        self._pairs(q0, queries, picked)
+        limits = [threshold(self.best.kth(q0 + j), self.width) for j in range(len(queries))]
+        left = ~(bounds > np.array(limits, np.float32)) & ~picked  # NaN bounds rule nothing out
+        left[self.excluded] = False
+        if np.count_nonzero(left) * _SCAN_RATIO >= self.live * len(queries):
+            _scan(self.views, queries, self.kernel, self.best, q0)  # reads less than they would
+        else:
+            self._pairs(q0, queries, left)
+
+    def _pairs(self, q0: int, queries: np.ndarray, wanted: np.ndarray) -> None:
+        """Exact distances of queries ``q0...`` to the rows ``wanted`` (physical rows, q) marks
+        for each, merged into ``best`` once per query: each run of blocks read once for all."""
+        marked, marks = np.nonzero(wanted)  # physical rows ascending, and the query of each
+        runs = [
+            (view, plan[i : i + _PAIR_BLOCKS])
+            for view, plan in zip(self.views, self.plans, strict=True)
+            for i in range(0, len(plan), _PAIR_BLOCKS)
+        ]
+        tasks = []
+        for view, run in runs:
+            lo, hi = np.searchsorted(marked, [view.start + run[0].start, view.start + run[-1].stop])
+            if hi > lo:
+                tasks.append((view, run, slice(int(lo), int(hi))))
+        run_rows = max((run[-1].stop - run[0].start for _, run in runs), default=1)
+        found: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in queries]
+
+        def work(
+            task: tuple[SegmentView, list[Block], slice], buffer: np.ndarray, lock: threading.Lock
+        ) -> None:
+            view, run, pairs = task
+            first = view.start + run[0].start
+            for block in run:
+                at = block.start - run[0].start
+                read_block(view.signatures, block, buffer[at : at + block.stop - block.start])
+            rows = buffer[: run[-1].stop - run[0].start]
+            order = np.argsort(marks[pairs], kind="stable")  # by query, rows ascending in each
+            local, which = marked[pairs][order] - first, marks[pairs][order]
+            cuts = np.flatnonzero(np.diff(which)) + 1
+            done = []
+            for mine, j in zip(np.split(local, cuts), which[np.r_[0, cuts]], strict=True):
+                dist = np.empty((1, len(mine)), np.float32)
+                self.kernel(queries[j][None], rows[mine], dist)
+                done.append((int(j), first + mine, dist[0]))
+            with lock:
+                for j, at_rows, dist_j in done:
+                    found[j].append((at_rows, dist_j))
+
+        parallel(tasks, work, partial(np.empty, (run_rows, self.width), np.float32))
+        for j, parts in enumerate(found):
+            if parts:
+                self.best.merge_rows(
+                    q0 + j,
+                    np.concatenate([r for r, _ in parts]),
+                    np.concatenate([d for _, d in parts]),
+                )
+
+    def _bounds(self, queries: np.ndarray, kernel: Kernel, by_row: bool = False) -> np.ndarray:
+        """(q, physical rows) lower bounds of the float32 distances (others left unset); or
+        ``by_row``, (physical rows, q), each block's then written in place (L1 is symmetric)."""
+        shape = (len(self.excluded), len(queries)) if by_row else (len(queries), len(self.excluded))
+        bounds = np.empty(shape, np.float32)
         sketches = {id(v): query_sketches(queries, v.sketch) for v in self.views if v.sketch}
         blocks = [
             (v, b) for v in self.views if v.sketch for b in plan_blocks(v.sketch.rows, _BLOCK_ROWS)
@@ -274,9 +360,13 @@ class _Pruned:
             assert view.sketch is not None
             rows = read_block(view.sketch.rows, block, buffer)
             at = slice(view.start + block.start, view.start + block.stop)
+            sketch, margin = sketches[id(view)]
+            if by_row:
+                kernel(rows, sketch, bounds[at])
+                adjust_bounds(bounds[at].T, margin, rows.shape[1])
+                return
             one = len(queries) == 1  # then a slice of the bounds is C-contiguous: written to
             out = bounds[:, at] if one else np.empty((len(queries), len(rows)), np.float32)
-            sketch, margin = sketches[id(view)]
             kernel(sketch, rows, out)
             adjust_bounds(out, margin, rows.shape[1])
             if not one:
@@ -448,6 +538,57 @@ def check_layout(reader: IndexReader) -> None:
         )
 
 
+def group_size(reader: IndexReader) -> int:
+    """How many queries a search of this index takes at a time: as many as `_BOUND_CELLS`
+    bounds hold. A caller with many queries gives them in multiples of it.
+
+    Parameters
+    ----------
+    reader : IndexReader
+        An open index.
+
+    Returns
+    -------
+    queries : int
+    """
+    return max(1, _BOUND_CELLS // max(1, reader.physical_rows))
+
+
+def search(reader: IndexReader, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The k nearest rows of each query by the index's descriptor's distance, exactly.
+
+    Parameters
+    ----------
+    reader : IndexReader
+        An open index with N entries.
+    queries : (q, length) float
+        Query signatures, made with the index's parameters.
+    k : int
+        Results per query.
+
+    Returns
+    -------
+    rows, distances : (q, min(k, N)) int64 and float64
+        As `nearest` (L1) or `nearest_by` (a descriptor that declares its own distance).
+
+    Raises
+    ------
+    IndexFileError
+        As `check_layout`.
+    """
+    check_layout(reader)
+    distance = descriptors.get(reader.params.descriptor).distance
+    if distance is None:
+        return nearest(reader, queries, k)
+    return nearest_by(reader, queries, k, distance)
+
+
+def hits(reader: IndexReader, rows: np.ndarray, dists: np.ndarray) -> list[list[Hit]]:
+    """Results as `Hit` lists: the entries of some rows (q, k) and their distances (q, k)."""
+    entries = iter(reader.entries(rows.ravel()) if rows.size else [])
+    return [[Hit(rank + 1, float(d), next(entries)) for rank, d in enumerate(row)] for row in dists]
+
+
 def query(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[Hit]]:
     """The k nearest indexed meshes of each query, with their names and labels.
 
@@ -471,15 +612,7 @@ def query(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[Hi
     IndexFileError
         As `check_layout`.
     """
-    check_layout(reader)
-    distance = descriptors.get(reader.params.descriptor).distance
-    if distance is None:
-        rows, dists = nearest(reader, queries, k)
-    else:
-        rows, dists = nearest_by(reader, queries, k, distance)
-    entries = reader.entries(rows.ravel()) if rows.size else []
-    it = iter(entries)
-    return [[Hit(rank + 1, float(d), next(it)) for rank, d in enumerate(row)] for row in dists]
+    return hits(reader, *search(reader, queries, k))
 
 
 class _Best:
