@@ -615,6 +615,61 @@ def query(reader: IndexReader, queries: np.ndarray, k: int = 20) -> list[list[Hi
     return hits(reader, *search(reader, queries, k))
 
 
+def query_names(reader: IndexReader, names: list[str], k: int = 20) -> list[list[Hit]]:
+    """The k nearest other entries of some indexed entries, by their stored signatures.
+
+    Parameters
+    ----------
+    reader : IndexReader
+        An open index.
+    names : list of str
+        Entry names: each is the query, and is left out of its own results.
+    k : int
+        Results per query.
+
+    Returns
+    -------
+    hits : list of list of Hit
+        As `query` gives for the entries' files, less each entry itself.
+
+    Raises
+    ------
+    UnknownNameError
+        A name is not in the index.
+    """
+    rows = reader.find(names)
+    found, dists = search(reader, reader.signatures[rows], k + 1)
+    return hits(reader, *without_self(rows, found, dists, k))
+
+
+def without_self(
+    rows: np.ndarray, found: np.ndarray, dists: np.ndarray, k: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The k results of queries that are rows of the index, each row left out of its own.
+
+    Parameters
+    ----------
+    rows : (q,) int
+        The queries' rows.
+    found, dists : (q, k + 1) int64 and float64
+        Their nearest rows and distances, as `search` gives them for k + 1.
+    k : int
+        Results to keep.
+
+    Returns
+    -------
+    found, dists : (q, min(k, N - 1))
+        Without each query's own row (or the last, when other rows tie with it at its rank).
+    """
+    own = found == np.asarray(rows)[:, None]
+    own[~own.any(axis=1), -1] = True  # then it ranked below k + 1 others (ties at 0)
+    keep = ~own
+    width = min(k, found.shape[1] - 1)
+    return found[keep].reshape(len(rows), -1)[:, :width], dists[keep].reshape(len(rows), -1)[
+        :, :width
+    ]
+
+
 class _Best:
     """The k smallest distances seen so far for each query, ties broken by row number."""
 
