@@ -1,0 +1,144 @@
+"""The ``amrg`` descriptor: the Reeb graphs of shapes whose graph is known, its invariances, its
+matching and its lower bound."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cfsig.descriptors import amrg
+from cfsig.errors import MeshError
+from cfsig.files.demo import limbed_body
+from cfsig.files.mesh import clean_mesh
+from tests.helpers import icosphere, random_rotation, torus
+
+
+def graph(vertices: np.ndarray, faces: np.ndarray) -> list[amrg.Level]:
+    """The Reeb graph of a generated surface."""
+    return amrg.reeb_graph(clean_mesh(vertices, faces))
+
+
+def cycles(level: amrg.Level) -> int:
+    """Independent cycles of a resolution's graph: edges - nodes + connected components."""
+    nodes = len(level.intervals)
+    parent = list(range(nodes))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            i = parent[i]
+        return i
+
+    for i, j in level.edges:
+        parent[root(i)] = root(j)
+    return len(level.edges) - nodes + len({root(i) for i in range(nodes)})
+
+
+def degrees(level: amrg.Level) -> np.ndarray:
+    """Each node's number of neighbours."""
+    return np.bincount(level.edges.ravel(), minlength=len(level.intervals))
+
+
+def distance(a: np.ndarray, b: np.ndarray) -> float:
+    """The ``amrg`` distance of two stored vectors."""
+    pair = np.array([a, b], np.float32)
+    return float(amrg.amrg_distances(pair[:1], pair[1:], None)[0, 0])
+
+
+@pytest.fixture(scope="module")
+def bodies() -> dict[str, np.ndarray]:
+    """The stored vectors of a three-limbed body at rest, moved, in two other poses, and of a
+    body with five limbs."""
+    rest = limbed_body(3, 0)
+    moved = (rest[0] @ random_rotation(3).T * 2.5 + [1.0, -2.0, 0.5], rest[1])
+    shapes = {
+        "rest": rest,
+        "moved": moved,
+        "pose 1": limbed_body(3, 1),
+        "pose 2": limbed_body(3, 2),
+        "five limbs": limbed_body(5, 0),
+    }
+    return {name: amrg.pack(graph(*shape)) for name, shape in shapes.items()}
+
+
+def test_a_sphere_and_an_ellipsoid_give_a_path_at_every_resolution():
+    vertices, faces = icosphere(3)
+    for shape in (vertices, vertices * [2.0, 1.0, 0.7]):
+        levels = graph(shape, faces)
+        assert len(levels) == amrg.RESOLUTIONS
+        for level in levels:
+            assert cycles(level) == 0 and degrees(level).max(initial=0) <= 2
+            assert len(level.edges) == len(level.intervals) - 1  # connected
+        # the ellipsoid's ends are apart: two nodes in its top interval, one in its lowest
+        if shape is not vertices:
+            top = levels[-1].intervals == levels[-1].intervals.max()
+            assert top.sum() == 2 and (levels[-1].intervals == 0).sum() == 1
+
+
+def test_a_torus_gives_one_cycle():
+    levels = graph(*torus())
+    assert cycles(levels[-1]) == 1
+    assert (degrees(levels[-1]) == 2).all()
+    assert all(cycles(level) <= 1 for level in levels)
+
+
+def test_a_body_with_three_limbs_gives_three_branches():
+    levels = graph(*limbed_body(3, 0))
+    for level in levels[2:]:
+        assert cycles(level) == 0 and len(level.edges) == len(level.intervals) - 1
+        tips = level.intervals == level.intervals.max()
+        assert tips.sum() == 3 and (degrees(level)[tips] == 1).all()
+
+
+def test_parents_hold_their_childrens_intervals():
+    levels = graph(*limbed_body(3, 0))
+    for coarse, fine in zip(levels, levels[1:], strict=False):
+        assert (coarse.intervals[fine.parents] == fine.intervals // 2).all()
+        area = np.bincount(fine.parents, fine.attributes[:, 0], len(coarse.intervals))
+        np.testing.assert_allclose(area, coarse.attributes[:, 0], atol=1e-12)
+
+
+def test_rigid_motion_and_scale_change_little(bodies):
+    """Only the farthest-point sampling of the bases moves: its ties on a symmetric body break
+    by rounding."""
+    moved = distance(bodies["rest"], bodies["moved"])
+    assert moved < 0.01
+    assert moved < distance(bodies["rest"], bodies["pose 2"]) / 10
+
+
+def test_an_isometric_bend_stays_nearer_than_another_shape(bodies):
+    other = distance(bodies["rest"], bodies["five limbs"])
+    for pose in ("pose 1", "pose 2"):
+        assert distance(bodies["rest"], bodies[pose]) < other / 2
+
+
+def test_a_graph_matched_with_itself_scores_best(bodies):
+    names = list(bodies)
+    vectors = np.array([bodies[name] for name in names], np.float32)
+    distances = amrg.amrg_distances(vectors, vectors, None)
+    assert np.abs(np.diag(distances)).max() < 1e-6
+    assert (distances >= np.diag(distances)[:, None] - 1e-9).all()
+    # the matching is symmetric, and the bound never exceeds it
+    np.testing.assert_allclose(distances, distances.T, atol=1e-9)
+    assert (amrg.amrg_bounds(vectors, vectors, None) <= distances).all()
+
+
+def test_the_bound_holds_on_random_graphs():
+    """Random stored vectors with nodes in random intervals: bound <= distance, pair by pair."""
+    rng = np.random.default_rng(0)
+    shapes = [limbed_body(n, seed) for n, seed in ((1, 0), (2, 1), (4, 2), (5, 3))]
+    vectors = np.array([amrg.pack(graph(*shape)) for shape in shapes], np.float32)
+    shuffled = vectors.copy()
+    for block in amrg._unpack(shuffled):
+        live = block[:, :, 0] >= 0
+        block[:, :, 0] = np.where(live, rng.integers(0, 2, live.shape) + block[:, :, 0], -1)
+    for rows in (vectors, shuffled):
+        bounds = amrg.amrg_bounds(vectors, rows, None)
+        assert (bounds <= amrg.amrg_distances(vectors, rows, None)).all()
+
+
+def test_a_flat_closed_surface_is_refused_in_one_line():
+    """A tetrahedron pressed flat: a closed surface of four proper triangles and no volume."""
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.3, 0.3, 0]], float)
+    faces = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    with pytest.raises(MeshError, match="^its Reeb graph cannot be built: [^\n]*$"):
+        graph(vertices, faces)
