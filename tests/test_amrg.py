@@ -5,12 +5,21 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
+from cfsig.cli import main
 from cfsig.descriptors import amrg
 from cfsig.errors import MeshError
 from cfsig.files.demo import limbed_body
 from cfsig.files.mesh import clean_mesh
-from tests.helpers import icosphere, random_rotation, torus
+from cfsig.params import Params
+from tests.helpers import (
+    assert_search_equals_full_scan,
+    icosphere,
+    random_rotation,
+    torus,
+    two_classes,
+)
 
 
 def graph(vertices: np.ndarray, faces: np.ndarray) -> list[amrg.Level]:
@@ -115,7 +124,7 @@ def test_a_graph_matched_with_itself_scores_best(bodies):
     names = list(bodies)
     vectors = np.array([bodies[name] for name in names], np.float32)
     distances = amrg.amrg_distances(vectors, vectors, None)
-    assert np.abs(np.diag(distances)).max() < 1e-6
+    assert (np.diag(distances) == 0).all()
     assert (distances >= np.diag(distances)[:, None] - 1e-9).all()
     # the matching is symmetric, and the bound never exceeds it
     np.testing.assert_allclose(distances, distances.T, atol=1e-9)
@@ -142,3 +151,31 @@ def test_a_flat_closed_surface_is_refused_in_one_line():
     faces = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
     with pytest.raises(MeshError, match="^its Reeb graph cannot be built: [^\n]*$"):
         graph(vertices, faces)
+
+
+def test_search_equals_a_full_scan(tmp_path):
+    """Graphs of eight shapes, each indexed several times (ties), in two segments with a row
+    superseded: the bounded search returns the full scan's rows and distances."""
+    shapes = [limbed_body(n, pose) for n in (1, 2, 3, 4, 5) for pose in (0, 1)][:8]
+    base = np.array([amrg.pack(graph(*shape)) for shape in shapes], np.float32)
+    rows = [base[(3 * i) % len(base)].copy() for i in range(30)]
+    assert_search_equals_full_scan(tmp_path / "index", Params(descriptor="amrg"), rows, base)
+
+
+def test_the_command_line_indexes_queries_evaluates_and_checks(tmp_path):
+    two_classes(tmp_path / "data")
+    runner = CliRunner()
+    index = str(tmp_path / "index")
+    out = runner.invoke(
+        main, ["index", str(tmp_path / "data"), "-o", index, "--descriptor", "amrg"]
+    )
+    assert out.exit_code == 0, out.output
+    out = runner.invoke(main, ["query", index, str(tmp_path / "data/long/a.off"), "-k", "2"])
+    assert out.exit_code == 0, out.output
+    lines = out.output.splitlines()
+    assert lines[1].split()[1:] == ["0.0000", "long/a.off", "long"]
+    assert lines[2].split()[3] == "long"
+    out = runner.invoke(main, ["evaluate", "--index", index, "--json"])
+    assert out.exit_code == 0 and '"NN": 1.0' in out.output, out.output
+    out = runner.invoke(main, ["check", index])
+    assert out.exit_code == 0 and "healthy (4 entries" in out.output

@@ -42,11 +42,12 @@ unmatched, and so on. The similarity of two nodes is
 
 with d the mean of the geometric attributes' differences (scalars: ``|x - y| / (x + y)``,
 histograms: half their L1 distance), each in [0, 1]. The similarity of two graphs at a
-resolution is the sum over its matched pairs, at most 1 (a graph with all its nodes kept
-reaches 1 against itself), and their distance is 1 minus the mean over the resolutions.
-`amrg_bounds` bounds it from below by the profiles: a matching pairs nodes of one interval,
-one to one, so their summed minima of area (or length) cannot exceed the smaller total of that
-interval.
+resolution is the sum over its matched pairs, at most the similarity of either graph with
+itself (`self_similarities`, 1 when no node was dropped); divided by the larger of those two,
+it is 1 for a graph and itself, exactly. Their distance is 1 minus its mean over the
+resolutions. `amrg_bounds` bounds it from below by the profiles: a matching pairs nodes of
+one interval, one to one, so their summed minima of area (or length) cannot exceed the smaller
+total of that interval.
 """
 
 from __future__ import annotations
@@ -80,8 +81,9 @@ FIELDS = 2 + len(ATTRIBUTES)  # interval, parent slot, then the attributes
 PROFILE = 2 * (2**RESOLUTIONS - 1)  # per resolution and interval: area and length sums
 LENGTH = PROFILE + sum(CAPS) * FIELDS
 CORD_REACH = 2.0  # the cord length histogram spans [0, CORD_REACH) times the node's mean
-# The bound's margin below the distance: searches round the exact distance to float32.
-_BOUND_MARGIN = 1e-6
+# The bound's margin below the distance: the profiles and the nodes are rounded to float32
+# apart, and searches round the exact distance to float32.
+_BOUND_MARGIN = 1e-5
 
 
 @dataclass(frozen=True)
@@ -488,8 +490,31 @@ def graph_similarities(query: np.ndarray, rows: np.ndarray) -> np.ndarray:
     return found
 
 
+def self_similarities(vectors: np.ndarray) -> np.ndarray:
+    """The matched similarity of each graph with itself, per resolution.
+
+    Parameters
+    ----------
+    vectors : (v, LENGTH) float32
+        Stored vectors.
+
+    Returns
+    -------
+    similarities : (v, RESOLUTIONS) float64
+        The sum of its nodes' ``sim(m, m)``, added in the order the matching adds them (from
+        the largest), so that a graph's `graph_similarities` with itself equals it exactly.
+    """
+    found = np.zeros((len(vectors), RESOLUTIONS))
+    for r, block in enumerate(_unpack(vectors)):
+        nodes = block.reshape(-1, FIELDS)
+        sims = node_similarities(nodes, nodes).reshape(block.shape[:2])
+        found[:, r] = np.cumsum(-np.sort(-sims, axis=1), axis=1)[:, -1]
+    return found
+
+
 def amrg_distances(queries: np.ndarray, rows: np.ndarray, l1: L1Kernel) -> np.ndarray:
-    """The ``amrg`` distance: 1 minus the mean over the resolutions of the graphs' similarity.
+    """The ``amrg`` distance: 1 minus the mean over the resolutions of the graphs' similarity,
+    each divided by the larger of the two graphs' similarity with itself.
 
     Parameters
     ----------
@@ -503,11 +528,13 @@ def amrg_distances(queries: np.ndarray, rows: np.ndarray, l1: L1Kernel) -> np.nd
     Returns
     -------
     distances : (q, m) float64
-        In [0, 1]; 0 for a graph and itself when every node was kept.
+        In [0, 1]; 0 for a graph and itself.
     """
+    own, theirs = self_similarities(queries), self_similarities(rows)
     out = np.empty((len(queries), len(rows)))
     for i, query in enumerate(queries):
-        out[i] = 1 - graph_similarities(query, rows).mean(axis=1)
+        scale = np.maximum(np.maximum(own[i], theirs), np.finfo(float).tiny)
+        out[i] = 1 - (graph_similarities(query, rows) / scale).mean(axis=1)
     return out
 
 
@@ -527,17 +554,32 @@ def amrg_bounds(queries: np.ndarray, rows: np.ndarray, l1: L1Kernel) -> np.ndarr
     -------
     bounds : (q, m) float64
         1 minus the mean over resolutions of the largest similarity any one-to-one matching
-        within intervals can reach: per interval, the smaller total area (times ``LAMBDA W +
-        1 - LAMBDA``) and the smaller total length (times ``LAMBDA (1 - W)``).
+        within intervals can reach, per interval the smaller total area (times ``LAMBDA W +
+        1 - LAMBDA``) and the smaller total length (times ``LAMBDA (1 - W)``), over the larger
+        of the two graphs' similarity with itself (the same sums of their own), less a margin
+        for rounding.
     """
     weights = np.concatenate(
         [np.repeat([LAMBDA * W + 1 - LAMBDA, LAMBDA * (1 - W)], 2**r) for r in range(RESOLUTIONS)]
     )
+    resolution = np.repeat(np.arange(RESOLUTIONS), 2 ** (np.arange(RESOLUTIONS) + 1))
     head = rows[:, :PROFILE].astype(np.float64)
+    theirs = _per_resolution(head * weights, resolution)
     out = np.empty((len(queries), len(rows)))
     for i, query in enumerate(queries):
-        out[i] = np.minimum(query[:PROFILE].astype(np.float64), head) @ weights
-    return 1 - out / RESOLUTIONS - _BOUND_MARGIN
+        profile = query[:PROFILE].astype(np.float64)
+        reach = _per_resolution(np.minimum(profile, head) * weights, resolution)
+        own = _per_resolution((profile * weights)[None], resolution)
+        scale = np.maximum(np.maximum(own, theirs), np.finfo(float).tiny)
+        out[i] = (reach / scale).mean(axis=1)
+    return 1 - out - _BOUND_MARGIN
+
+
+def _per_resolution(values: np.ndarray, resolution: np.ndarray) -> np.ndarray:
+    """Sums of profile columns (v, PROFILE) per resolution: (v, RESOLUTIONS)."""
+    out = np.zeros((len(values), RESOLUTIONS))
+    np.add.at(out.T, resolution, values.T)
+    return out
 
 
 DESCRIPTOR = Descriptor(
