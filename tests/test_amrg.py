@@ -5,20 +5,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from cfsig.cli import main
 from cfsig.descriptors import amrg
 from cfsig.errors import MeshError
 from cfsig.files.demo import limbed_body
 from cfsig.files.mesh import clean_mesh
 from cfsig.params import Params
 from tests.helpers import (
+    assert_command_line_round_trip,
     assert_search_equals_full_scan,
     icosphere,
     random_rotation,
     torus,
-    two_classes,
 )
 
 
@@ -163,19 +161,4 @@ def test_search_equals_a_full_scan(tmp_path):
 
 
 def test_the_command_line_indexes_queries_evaluates_and_checks(tmp_path):
-    two_classes(tmp_path / "data")
-    runner = CliRunner()
-    index = str(tmp_path / "index")
-    out = runner.invoke(
-        main, ["index", str(tmp_path / "data"), "-o", index, "--descriptor", "amrg"]
-    )
-    assert out.exit_code == 0, out.output
-    out = runner.invoke(main, ["query", index, str(tmp_path / "data/long/a.off"), "-k", "2"])
-    assert out.exit_code == 0, out.output
-    lines = out.output.splitlines()
-    assert lines[1].split()[1:] == ["0.0000", "long/a.off", "long"]
-    assert lines[2].split()[3] == "long"
-    out = runner.invoke(main, ["evaluate", "--index", index, "--json"])
-    assert out.exit_code == 0 and '"NN": 1.0' in out.output, out.output
-    out = runner.invoke(main, ["check", index])
-    assert out.exit_code == 0 and "healthy (4 entries" in out.output
+    assert_command_line_round_trip(tmp_path, "amrg")
