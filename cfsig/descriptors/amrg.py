@@ -20,8 +20,8 @@ The steps, and the choices made where the papers leave them open (docs/method.md
   that holds its faces.
 - Per node (`ATTRIBUTES`), Hilaga's ``area`` (its share of the surface) and ``length`` (the
   span of ``mu_n`` it covers, as a share of the sum of its resolution's spans), then Tung and
-  Schmitt's geometric attributes: ``volume`` (the share of the enclosed volume that the cones
-  from the mesh's centroid to its faces take, in absolute value), ``extent`` (the mean length of
+  Schmitt's geometric attributes: ``volume`` (its share of the cones from the mesh's centroid
+  to the faces, by absolute volume), ``extent`` (the mean length of
   its cords over the square root of the surface's area; a cord runs from the node's centroid to
   a face's), and three histograms of `BINS` bins weighted by face area: the Koenderink shape
   index, the cord lengths over their mean, and the absolute cosine of the cords with the node's
@@ -61,7 +61,14 @@ from scipy.spatial import cKDTree
 
 from cfsig.descriptors.base import Computed, Descriptor, Distance, L1Kernel
 from cfsig.errors import MeshError
-from cfsig.files.elements import edge_lengths, mesh_edges, paired_half_edges
+from cfsig.files.elements import (
+    edge_lengths,
+    face_areas,
+    mesh_edges,
+    paired_half_edges,
+    signed_volumes,
+    vertex_normals,
+)
 from cfsig.files.mesh import Mesh
 from cfsig.operators.conformal import ConformalFactor, operators
 from cfsig.params import Layout, Params
@@ -109,7 +116,11 @@ class Level:
 
 
 def integral_geodesic(
-    vertices: np.ndarray, faces: np.ndarray, edges: np.ndarray, bases: int = BASES
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    areas: np.ndarray,
+    edges: np.ndarray,
+    bases: int = BASES,
 ) -> np.ndarray:
     """Hilaga's normalised integral of geodesic distance at each vertex.
 
@@ -119,6 +130,8 @@ def integral_geodesic(
         Vertex positions.
     faces : (m, 3) int64
         Triangles, every vertex referenced.
+    areas : (m,) float64
+        Their areas.
     edges : (e, 2) int64
         Their edges' ends (`cfsig.files.elements.Edges.ends`).
     bases : int
@@ -139,7 +152,7 @@ def integral_geodesic(
     edges = np.concatenate([edges, bridges(vertices, edges)])
     length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
     graph = sp.coo_matrix((length, (edges[:, 0], edges[:, 1])), shape=(n, n)).tocsr()
-    area = np.bincount(faces.ravel(), np.repeat(_face_areas(vertices, faces) / 3, 3), n)
+    area = np.bincount(faces.ravel(), np.repeat(areas / 3, 3), n)
     rows = np.empty((min(bases, n), n))
     nearest = np.full(n, np.inf)
     base = int(np.argmax(dijkstra(graph, directed=False, indices=0)))  # an end of the surface
@@ -215,21 +228,19 @@ def reeb_graph(mesh: Mesh) -> list[Level]:
     surface = simplified_mesh(mesh, COARSE) or mesh
     vertices, faces = surface.vertices, surface.faces
     edges = surface.edges or mesh_edges(faces, len(vertices))
-    mu = integral_geodesic(vertices, faces, edges.ends)
-    face_area = _face_areas(vertices, faces)
+    face_area = face_areas(edge_lengths(vertices, faces))
+    mu = integral_geodesic(vertices, faces, face_area, edges.ends)
     total = face_area.sum()
-    corners = vertices[faces]
-    centroid = (corners.mean(axis=1) * face_area[:, None]).sum(axis=0) / total
-    cones = np.abs(np.einsum("ij,ij->i", corners[:, 0] - centroid, np.cross(
-        corners[:, 1] - centroid, corners[:, 2] - centroid
-    ))) / 6  # fmt: skip
+    centre = vertices[faces].mean(axis=1)
+    centroid = (centre * face_area[:, None]).sum(axis=0) / total
+    cones = np.abs(signed_volumes(vertices - centroid, faces))
     if not total > 0 or not cones.sum() > 0:
         raise MeshError("its Reeb graph cannot be built: the surface has no area or volume")
     face = _FaceData(
         mu=mu[faces],
         area=face_area / total,
         volume=cones / cones.sum(),
-        centre=corners.mean(axis=1),
+        centre=centre,
         shape_index=_shape_index(surface)[faces].mean(axis=1),
         scale=np.sqrt(total),
     )
@@ -323,24 +334,13 @@ def _histogram(node: np.ndarray, unit: np.ndarray, weights: np.ndarray, k: int) 
     return counts.reshape(k, BINS)
 
 
-def _face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Triangle areas (m,), from their edge lengths."""
-    lengths = edge_lengths(vertices, faces)
-    s = lengths.sum(axis=1) / 2
-    return np.sqrt(np.maximum(s * (s[:, None] - lengths).prod(axis=1), 0))
-
-
 def _shape_index(surface: Mesh) -> np.ndarray:
     """Koenderink's shape index at each vertex, in [-1, 1] (+1: a cap, -1: a cup), from the
     mean curvature of the cotangent Laplacian and the angle defect."""
     ops = operators(surface)
     area = np.maximum(ops.vertex_area, np.finfo(float).tiny)
-    corners = surface.vertices[surface.faces]
-    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    vertex_normals = np.zeros_like(surface.vertices)
-    np.add.at(vertex_normals, surface.faces.ravel(), np.repeat(normals, 3, axis=0))
-    mean = -np.einsum("ij,ij->i", ops.laplacian @ surface.vertices, vertex_normals)
-    mean /= 2 * area * np.maximum(np.linalg.norm(vertex_normals, axis=1), np.finfo(float).tiny)
+    normals = vertex_normals(surface.vertices, surface.faces)
+    mean = -np.einsum("ij,ij->i", ops.laplacian @ surface.vertices, normals) / (2 * area)
     gauss = ops.curvature / area
     gap = 2 * np.sqrt(np.maximum(mean**2 - gauss, 0))  # k1 - k2
     return np.arctan2(2 * mean, gap) * (2 / np.pi)
