@@ -1,7 +1,7 @@
 """Seconds per mesh of each descriptor, end to end, against the default's in the same run.
 
     python benchmarks/per_mesh.py --data FOLDER [--every K] [--descriptors cf,intrinsic,...]
-        [--repeat N] [--channels]
+        [--repeat N] [--channels] [--vertices V] [--rank-rows R]
 
 For the meshes ``FOLDER/<class>/<file>.off`` (every k-th in sorted order) and each descriptor
 in turn (default: all):
@@ -11,11 +11,15 @@ in turn (default: all):
   warm-up on the first mesh (imports and first calls are not per-mesh costs): the medians;
 - the whole process a user waits for: ``python -m cfsig index`` of a folder holding those
   meshes into a new index, one job, interpreter start included, in wall seconds per mesh: the
-  median of ``--repeat`` runs.
+  median of ``--repeat`` runs;
+- ranking one query against ``--rank-rows`` signatures (the meshes' own, repeated), by the
+  descriptor's distance (`cfsig.search.nearest.distances`, the full scan `cfsig evaluate`
+  makes), in wall seconds: the median over the meshes as queries.
 
 Each with its ratio to the default ``intrinsic``'s in the same run. With ``--channels``, only
 ``rigid``'s stages, in this process: reading and repair, then each channel on the repaired mesh,
-wall seconds, medians over the meshes.
+wall seconds, medians over the meshes. ``--vertices V`` keeps
+the meshes of V vertices, give or take 2%.
 """
 
 from __future__ import annotations
@@ -34,13 +38,21 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 from common import data_arguments, median, meshes, table
 
 import cfsig
 from cfsig.descriptors import NAMES, intrinsic, lf, panorama, rigid, sh
+from cfsig.files.mesh import read_mesh
 from cfsig.repair.stage import repair_mesh
+from cfsig.search.nearest import distances
 
 DEFAULT = cfsig.Params().descriptor
+
+
+def vertex_count(path: Path) -> int:
+    """Vertices of a mesh as read."""
+    return len(read_mesh(path).vertices)
 
 
 def timed(path, params: cfsig.Params) -> tuple[float, float]:
@@ -81,6 +93,17 @@ def whole_run(folder: Path, descriptor: str, index: Path) -> float:
     return time.perf_counter() - start
 
 
+def ranking(signatures: np.ndarray, descriptor: str, rows: int) -> float:
+    """Median wall seconds of ranking each signature against ``rows`` of them, repeated."""
+    indexed = np.resize(signatures, (rows, signatures.shape[1]))
+    seconds = []
+    for query in signatures:
+        start = time.perf_counter()
+        distances(descriptor, query[None], indexed)
+        seconds.append(time.perf_counter() - start)
+    return median(seconds)
+
+
 def linked(files: list[Path], folder: Path) -> Path:
     """A folder ``<class>/<file>`` of links to ``files``."""
     for path in files:
@@ -96,8 +119,12 @@ def main() -> None:
     parser.add_argument("--descriptors", default=",".join(NAMES), help="comma-separated")
     parser.add_argument("--repeat", type=int, default=3, help="whole runs per descriptor")
     parser.add_argument("--channels", action="store_true", help="time rigid's stages only")
+    parser.add_argument("--vertices", type=int, help="only meshes of this many vertices (±2%%)")
+    parser.add_argument("--rank-rows", type=int, default=400, help="signatures a query ranks")
     args = parser.parse_args()
     files = meshes(args.data, args.every)
+    if args.vertices:
+        files = [f for f in files if abs(vertex_count(f) - args.vertices) <= args.vertices / 50]
     if args.channels:
         channel_seconds(files[0])
         stages = [channel_seconds(path) for path in files]
@@ -111,6 +138,11 @@ def main() -> None:
     for p in params.values():
         timed(files[0], p)
     times = {d: [timed(path, p) for path in files] for d, p in params.items()}
+    signatures = {
+        d: np.array([cfsig.signature_file(path, p).vector for path in files], np.float32)
+        for d, p in params.items()
+    }
+    rank = {d: ranking(signatures[d], d, args.rank_rows) for d in names}
     cpu = {d: median([c for c, _ in t]) for d, t in times.items()}
     wall = {d: median([w for _, w in t]) for d, t in times.items()}
     with tempfile.TemporaryDirectory() as tmp:
@@ -123,10 +155,11 @@ def main() -> None:
     print(f"{len(files)} meshes from {args.data}; medians, seconds per mesh:\n")
     rows = [
         [f"`{d}`", f"{cpu[d]:.4f}", f"{wall[d]:.4f}", f"{wall[d] / wall[DEFAULT]:.2f}",
-         f"{runs[d]:.4f}", f"{runs[d] / runs[DEFAULT]:.2f}"]
+         f"{runs[d]:.4f}", f"{runs[d] / runs[DEFAULT]:.2f}", f"{rank[d]:.4f}"]
         for d in names
     ]  # fmt: skip
-    headers = ["descriptor", "CPU", "wall", f"wall / `{DEFAULT}`", "whole run", "ratio"]
+    headers = ["descriptor", "CPU", "wall", f"wall / `{DEFAULT}`", "whole run", "ratio",
+               f"rank 1 vs {args.rank_rows}"]  # fmt: skip
     print(table(headers, rows))
 
 

@@ -55,7 +55,8 @@ _descriptor_option = click.option(
     default=None,
     help="What to compute: the spectrum, heat kernel signatures and curvature at scales "
     "(intrinsic); the paper's histogram of the conformal factor (cf); the peers it compares "
-    "with: spherical harmonics (sh), the global point signature (gps), the light field (lf); "
+    "with: spherical harmonics (sh), the global point signature (gps), the light field (lf), "
+    "the augmented multiresolution Reeb graph (amrg); "
     "or, for rigid objects, intrinsic, panoramas and lf weighed together (rigid) [intrinsic, or "
     "an existing index's own].",
 )
@@ -440,7 +441,7 @@ def _format_routes(routes: Counter[str]) -> str:
     help="Each query is a part of a shape (a cut, a scan, holes): find the wholes it belongs to.",
 )
 def query(index_file, meshes, names, k, solver, stage_timeout, as_json, png, partial) -> None:
-    """Find the k indexed meshes nearest to each query mesh (L1 distance; lf, rigid: their own).
+    """Find the k indexed meshes nearest to each query mesh (L1; lf, rigid, amrg: their own).
 
     With --name, the queries are indexed entries, by the signatures stored: no file is read,
     and each is left out of its own results.

@@ -22,11 +22,12 @@ class Params:
     descriptor : str
         What the signature is, a name of `cfsig.descriptors.NAMES`: ``"intrinsic"``, the
         default (the spectrum, heat kernel signatures and curvature at scales); ``"cf"``, the
-        paper's histogram of phi; ``"sh"``, ``"gps"`` and ``"lf"``, the spherical harmonic
-        descriptor, the global point signature and the light field descriptor the paper compares
-        with; ``"rigid"``, for rigid objects: ``intrinsic``'s channels, panoramic projections and
-        ``lf``'s silhouettes weighed together. ``bins`` to ``normalize`` apply to ``cf`` only,
-        ``seed`` also to ``sh``, ``gps`` and ``rigid``.
+        paper's histogram of phi; ``"sh"``, ``"gps"``, ``"lf"`` and ``"amrg"``, the spherical
+        harmonic descriptor, the global point signature, the light field descriptor and the
+        augmented multiresolution Reeb graph the paper compares with; ``"rigid"``, for rigid
+        objects: ``intrinsic``'s channels, panoramic projections and ``lf``'s silhouettes weighed
+        together. ``bins`` to ``normalize`` apply to ``cf`` only, ``seed`` also to ``sh``, ``gps``
+        and ``rigid``.
     bins : int
         Number of histogram bins (paper section 2.3: 200).
     low, high : float

@@ -6,7 +6,9 @@ import os
 from pathlib import Path
 
 import numpy as np
+from click.testing import CliRunner
 
+from cfsig.cli import main
 from cfsig.descriptors import get, layout
 from cfsig.descriptors.signature import Signature, compute_signature
 from cfsig.files.demo import capsule, limbed_body
@@ -239,3 +241,24 @@ def two_classes(folder: Path) -> None:
     }
     for name, (vertices, faces) in meshes.items():
         write_off(folder / name, vertices, faces)
+
+
+def assert_command_line_round_trip(folder: Path, descriptor: str) -> None:
+    """`two_classes` in ``folder/data``, indexed with ``descriptor`` by the command line into
+    ``folder/index``: a query finds its own mesh first and its class next, the index evaluates
+    to NN 1 and checks healthy."""
+    two_classes(folder / "data")
+    runner = CliRunner()
+    index = str(folder / "index")
+    args = ["index", str(folder / "data"), "-o", index, "--descriptor", descriptor]
+    out = runner.invoke(main, args)
+    assert out.exit_code == 0, out.output
+    out = runner.invoke(main, ["query", index, str(folder / "data/long/a.off"), "-k", "2"])
+    assert out.exit_code == 0, out.output
+    lines = out.output.splitlines()
+    assert lines[1].split()[1:] == ["0.0000", "long/a.off", "long"]
+    assert lines[2].split()[3] == "long"
+    out = runner.invoke(main, ["evaluate", "--index", index, "--json"])
+    assert out.exit_code == 0 and '"NN": 1.0' in out.output, out.output
+    out = runner.invoke(main, ["check", index])
+    assert out.exit_code == 0 and "healthy (4 entries" in out.output

@@ -5,9 +5,7 @@ from math import factorial
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from cfsig.cli import main
 from cfsig.descriptors import lf
 from cfsig.descriptors.signature import compute_signature
 from cfsig.files.demo import capsule, torus
@@ -16,10 +14,10 @@ from cfsig.params import Params
 from cfsig.search.l1 import l1_numpy
 from tests.helpers import (
     SHAPES,
+    assert_command_line_round_trip,
     assert_search_equals_full_scan,
     icosphere,
     random_rotation,
-    two_classes,
 )
 
 LF = Params(descriptor="lf")
@@ -180,21 +178,7 @@ def test_search_equals_a_full_scan(tmp_path, vectors):
 
 
 def test_the_command_line_indexes_queries_evaluates_and_checks(tmp_path):
-    two_classes(tmp_path / "data")
-    runner = CliRunner()
-    index = str(tmp_path / "index")
-    out = runner.invoke(main, ["index", str(tmp_path / "data"), "-o", index, "--descriptor", "lf"])
-    assert out.exit_code == 0, out.output
-    out = runner.invoke(main, ["query", index, str(tmp_path / "data/long/a.off"), "-k", "2"])
-    assert out.exit_code == 0, out.output
-    lines = out.output.splitlines()
-    assert lines[1].split()[1:] == ["0.0000", "long/a.off", "long"]
-    assert lines[2].split()[3] == "long"
-    out = runner.invoke(main, ["evaluate", "--index", index, "--json"])
-    assert out.exit_code == 0, out.output
-    assert '"NN": 1.0' in out.output
-    out = runner.invoke(main, ["check", index])
-    assert out.exit_code == 0 and "healthy (4 entries" in out.output
+    assert_command_line_round_trip(tmp_path, "lf")
 
 
 def test_signature_goes_through_the_repair_stage():

@@ -18,6 +18,7 @@ from cfsig.repair.stage import repair_mesh
 from cfsig.search.l1 import l1_numpy
 from tests.helpers import (
     SHAPES,
+    assert_command_line_round_trip,
     assert_search_equals_full_scan,
     open_cylinder,
     random_rotation,
@@ -131,26 +132,13 @@ def test_search_equals_a_full_scan(tmp_path, vectors):
 
 
 def test_the_command_line_computes_indexes_queries_evaluates_and_checks(tmp_path):
-    two_classes(tmp_path / "data")
-    runner = CliRunner()
+    assert_command_line_round_trip(tmp_path, "rigid")
     one = str(tmp_path / "data/long/a.off")
-    out = runner.invoke(main, ["compute", one, "--descriptor", "rigid", "--save", str(tmp_path)])
+    out = CliRunner().invoke(
+        main, ["compute", one, "--descriptor", "rigid", "--save", str(tmp_path)]
+    )
     assert out.exit_code == 0, out.output
     assert np.load(tmp_path / "a.npz")["signature"].shape == (rigid.LENGTH,)
-    index = str(tmp_path / "index")
-    args = ["index", str(tmp_path / "data"), "-o", index, "--descriptor", "rigid"]
-    out = runner.invoke(main, args)
-    assert out.exit_code == 0, out.output
-    out = runner.invoke(main, ["query", index, one, "-k", "2"])
-    assert out.exit_code == 0, out.output
-    lines = out.output.splitlines()
-    assert lines[1].split()[1:] == ["0.0000", "long/a.off", "long"]
-    assert lines[2].split()[3] == "long"
-    out = runner.invoke(main, ["evaluate", "--index", index, "--json"])
-    assert out.exit_code == 0, out.output
-    assert '"NN": 1.0' in out.output
-    out = runner.invoke(main, ["check", index])
-    assert out.exit_code == 0 and "healthy (4 entries" in out.output
 
 
 def test_signature_goes_through_the_repair_stage():

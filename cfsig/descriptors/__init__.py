@@ -21,6 +21,7 @@ _MODULES = {
     "gps": "cfsig.descriptors.gps",
     "lf": "cfsig.descriptors.lf",
     "rigid": "cfsig.descriptors.rigid",
+    "amrg": "cfsig.descriptors.amrg",
 }
 NAMES = tuple(_MODULES)  # the default first
 

@@ -14,7 +14,7 @@ from types import ModuleType
 import numpy as np
 
 from cfsig.errors import MissingDependencyError
-from cfsig.files.elements import components, edge_graph
+from cfsig.files.elements import components, edge_graph, vertex_normals
 from cfsig.files.mesh import Mesh
 
 CMAP = "turbo"
@@ -190,7 +190,9 @@ def shade_mesh(
     face, bary = rasterize(points, faces, width, height)
     covered = face >= 0
     corners, bary = faces[face[covered]], bary[covered]
-    normals = np.einsum("kj,kjd->kd", bary, (_vertex_normals(mesh) @ view.T)[corners])
+    normals = np.einsum(
+        "kj,kjd->kd", bary, (vertex_normals(mesh.vertices, mesh.faces) @ view.T)[corners]
+    )
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
     normals *= np.where(normals[:, 2:] < 0, -1.0, 1.0)  # light both sides of open surfaces
     light = _AMBIENT + _DIFFUSE * np.clip(normals @ LIGHT, 0, 1)
@@ -219,17 +221,6 @@ def _rotation(axis: int, angle: float) -> np.ndarray:
     if axis == 0:
         return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
     return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-
-
-def _vertex_normals(mesh: Mesh) -> np.ndarray:
-    """Area-weighted vertex normals, (n, 3), unit length (zero for isolated vertices)."""
-    corner = mesh.vertices[mesh.faces]
-    face_normals = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
-    index = mesh.faces.ravel()
-    normals = np.column_stack(
-        [np.bincount(index, np.repeat(face_normals[:, d], 3), len(mesh.vertices)) for d in range(3)]
-    )
-    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
 
 
 def _visible_faces(mesh: Mesh, toward: np.ndarray) -> np.ndarray:

@@ -236,3 +236,27 @@ def face_areas(lengths: np.ndarray) -> np.ndarray:
     c = np.minimum(np.minimum(x, y), z)
     prod = (a + (b + c)) * (c - (a - b)) * (c + (a - b)) * (a + (b - c))
     return 0.25 * np.sqrt(np.maximum(prod, 0.0))
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        Vertex positions.
+    faces : (m, 3) int64
+        Triangles.
+
+    Returns
+    -------
+    normals : (n, 3) float64
+        Unit length (zero for isolated vertices), along the faces' orientation.
+    """
+    corner = vertices[faces]
+    face_normals = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
+    index = faces.ravel()
+    normals = np.column_stack(
+        [np.bincount(index, np.repeat(face_normals[:, d], 3), len(vertices)) for d in range(3)]
+    )
+    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
