@@ -10,8 +10,8 @@ a commit every 100,000 rows.
 
 Then times the whole command ``python -m cfsig query DIR/rows-N PART.off --partial`` in a fresh
 interpreter (its start, imports, the part's measurement and the search of every row included),
-PART a plane cut of one demo mesh (`results.cut`), ``--repeat`` times after one warm-up, and
-prints the median and the range in seconds.
+PART half of one demo mesh cut by a plane and re-tessellated (`world.query_mesh`),
+``--repeat`` times after one warm-up, and prints the median and the range in seconds.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from results import cut
+from world import query_mesh
 
 import cfsig
 from cfsig.files.demo import make_demo_collection, write_off
@@ -75,7 +75,7 @@ def main() -> None:
             print(f"reusing {index}: {len(reader):,} rows")
     else:
         print(f"built {index}: {args.rows:,} rows in {build(index, args.rows, demo):.1f} s")
-    part = cut(cfsig.read_mesh(demo[0]), np.random.default_rng(0))
+    part = query_mesh(cfsig.read_mesh(demo[0]), "cut", 0.5, np.random.default_rng(0))
     path = args.index_dir / "part.off"
     write_off(path, part.vertices, part.faces)
     command = [sys.executable, "-m", "cfsig", "query", str(index), str(path), "--partial"]
