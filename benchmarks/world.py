@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 from common import collection_parser, command, table
-from scipy.sparse.csgraph import dijkstra
+from scipy.sparse.csgraph import connected_components, dijkstra
 
 import cfsig
 from cfsig.evaluation.measures import evaluate_distances, evaluate_queries
@@ -69,6 +69,10 @@ RANKINGS = {"curvature columns": cfsig.Params(), "fine cells": cfsig.Params(part
 SHOT = 0.1  # how far, over the diagonal, shot noise throws 0.1% of the vertices
 MEASURES = ("NN", "FT", "mAP")
 SCAN_PIXELS = 128
+# Depths a 2 x 2 block of a scan's pixels may span: a surface up to about 75 degrees from
+# facing the sensor, as depth sensors see.
+SCAN_STEP = 6
+SCAN_ISLAND = 0.02
 RETESSELLATED = 0.6  # faces of a re-tessellated part over its own
 SECTION = "<!-- benchmarks/world.py -->", "<!-- /benchmarks/world.py -->"
 
@@ -126,7 +130,7 @@ def scan(mesh: Mesh, noise: float, rng: np.random.Generator) -> tuple[np.ndarray
 
     The surface nearest the sensor at each pixel of a `SCAN_PIXELS`-wide orthographic depth
     image is a vertex; each 2 x 2 block of pixels that all see the surface, at depths within
-    three pixels of each other, gives two triangles. Gaussian noise of ``noise`` times the
+    `SCAN_STEP` pixels of each other, gives two triangles. Gaussian noise of ``noise`` times the
     bounding-box diagonal moves each vertex along the view.
     """
     toward = rng.normal(size=3)
@@ -148,10 +152,14 @@ def scan(mesh: Mesh, noise: float, rng: np.random.Generator) -> tuple[np.ndarray
     a, b, c, d = grid[:-1, :-1], grid[:-1, 1:], grid[1:, :-1], grid[1:, 1:]
     span = np.stack([depth[:-1, :-1], depth[:-1, 1:], depth[1:, :-1], depth[1:, 1:]])
     with np.errstate(invalid="ignore"):  # NaN where a pixel sees nothing: no block
-        block = np.ptp(span, axis=0) < 3
+        block = np.ptp(span, axis=0) < SCAN_STEP
     a, b, c, d = a[block], b[block], c[block], d[block]
     faces = np.concatenate([np.column_stack([a, c, b]), np.column_stack([b, c, d])])
-    return where, faces
+    # islands of less than `SCAN_ISLAND` of the faces are dropped, as scanning software does
+    ends = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]]])
+    graph = sp.coo_matrix((np.ones(len(ends)), (ends[:, 0], ends[:, 1])), shape=(len(where),) * 2)
+    labels = connected_components(graph, directed=False)[1][faces[:, 0]]
+    return where, faces[np.bincount(labels)[labels] >= SCAN_ISLAND * len(faces)]
 
 
 def noisy(mesh: Mesh, noise: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -347,7 +355,8 @@ def collection_rows(
         everything = sorted(indexed + queried)
         copies = [
             [name, kind_name(kind, amount), *noise_duplicates(everything, kind, amount, tmp, jobs)]
-            for kind, amount in [("noise", a) for a in amounts.get("noise", ())] + [("shot", SHOT)]
+            for kind, amount in [("noise", a) for a in amounts.get("noise", ())]
+            + [("shot", SHOT)] * ("noise" in amounts)
         ]
     return out, duplicate, copies
 
