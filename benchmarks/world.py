@@ -18,8 +18,8 @@ per kind and amount, each from ``np.random.default_rng(i)``:
 - ``holes-S``: geodesic discs around 5 random points, grown together until they hold the share
   S of the area, removed;
 - ``scan-N``: what a depth sensor sees from one random direction: a 128 x 128 depth image of the
-  surface, triangulated pixel by pixel where neighbouring depths agree, with Gaussian noise of N%
-  of the bounding-box diagonal along the view;
+  surface, triangulated pixel by pixel where neighbouring depths agree, islands of less than 2%
+  dropped, with Gaussian noise of N% of the bounding-box diagonal along the view;
 - ``noise-N``: the whole shape with Gaussian noise of N% of the diagonal on every vertex;
 - ``shot-R`` (copies of every mesh only): 0.1% of the vertices thrown R% of the diagonal.
 
@@ -72,7 +72,7 @@ SCAN_PIXELS = 128
 # Depths a 2 x 2 block of a scan's pixels may span: a surface up to about 75 degrees from
 # facing the sensor, as depth sensors see.
 SCAN_STEP = 6
-SCAN_ISLAND = 0.02
+SCAN_ISLAND = 0.02  # a scan's smallest piece kept, over its faces
 RETESSELLATED = 0.6  # faces of a re-tessellated part over its own
 SECTION = "<!-- benchmarks/world.py -->", "<!-- /benchmarks/world.py -->"
 
