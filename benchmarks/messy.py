@@ -910,9 +910,9 @@ def summary(results: dict, name: str) -> str:
     return "\n".join(
         [
             f"Measured by `{results['command']}` on {results['meshes']} meshes of {name}, a "
-            "copy of each per kind. Rank 1: the copies whose own original is the nearest clean "
-            "mesh (duplicates as one: the clean meshes saved twice count as one shape); FT: the "
-            "copies of a kind as a collection, leave-one-out.",
+            "copy of each per kind, near-duplicate search. Rank 1: the copies whose own original "
+            "is the nearest clean mesh (duplicates as one: the clean meshes saved twice count as "
+            "one shape); FT: the copies of a kind as a collection, leave-one-out.",
             "",
             common.table(headers, rows),
             "",

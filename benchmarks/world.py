@@ -389,9 +389,9 @@ def main() -> None:
             "",
             table(head, duplicate),
             "",
-            "Noisy copies of every mesh against the clean collection: rank 1 of its own "
-            "original, and the first tier of the noisy copies as a collection beside the clean "
-            "one's.",
+            "Near-duplicate search: noisy copies of every mesh against the clean collection, "
+            "rank 1 of its own original, and the first tier of the noisy copies as a collection "
+            "beside the clean one's.",
             "",
             table(["collection", "copies", "rank 1 %", "noisy FT", "clean FT"], copies),
         ]
