@@ -52,11 +52,13 @@ from common import collection_parser, command, table
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 import cfsig
-from cfsig.evaluation.measures import evaluate_distances, evaluate_queries
+from cfsig.evaluation.collections import Collection
+from cfsig.evaluation.measures import evaluate_queries
 from cfsig.figures.raster import rasterize, screen_coordinates
 from cfsig.files.demo import write_off
 from cfsig.files.mesh import Mesh, clean_mesh
 from cfsig.repair.simplify import decimate
+from cfsig.search.nearest import distances
 
 COLLECTIONS = ("shrec07", "mcgill", "faust")
 AMOUNTS = {
@@ -285,32 +287,23 @@ def whole_queries(index: Path, folder: Path, jobs: int) -> cfsig.RetrievalReport
     found, failures = cfsig.compute_collection(folder, params, jobs=jobs)
     for line in failures:
         print(line, file=sys.stderr)
-    distances = np.abs(found.signatures[:, None, :] - stored[None, :, :]).sum(axis=2)
-    return evaluate_queries(distances, found.labels, labels)
+    return evaluate_queries(
+        distances(params.descriptor, found.signatures, stored), found.labels, labels
+    )
 
 
 def noise_duplicates(
-    paths: list[Path], kind: str, amount: float, tmp: Path, jobs: int
+    clean: Collection, paths: list[Path], kind: str, amount: float, tmp: Path, jobs: int
 ) -> list[str]:
-    """Rank 1 of each noisy copy's own original among the clean meshes, and the first tier of
-    the noisy copies, leave-one-out, beside the clean meshes' own."""
-    clean_folder, noisy_folder = tmp / "clean", tmp / kind_name(kind, amount)
-    if not clean_folder.exists():
-        link(paths, clean_folder)
+    """Rank 1 of each noisy copy's own original among the clean meshes (the collection of
+    ``paths``), and the first tier of the noisy copies, leave-one-out."""
     make_queries(paths, tmp, ((kind, amount),), jobs)
-    params = cfsig.Params()
-    clean, _ = cfsig.compute_collection(clean_folder, params, jobs=jobs)
-    copies, _ = cfsig.compute_collection(noisy_folder, params, jobs=jobs)
+    copies, _ = cfsig.compute_collection(tmp / kind_name(kind, amount), cfsig.Params(), jobs=jobs)
     assert clean.names == copies.names  # the same files, in the same order
-    distances = np.abs(copies.signatures[:, None, :] - clean.signatures[None, :, :]).sum(axis=2)
-    rank1 = float(np.mean(np.argmin(distances, axis=1) == np.arange(len(distances))))
-    own = np.abs(copies.signatures[:, None, :] - copies.signatures[None, :, :]).sum(axis=2)
-    first = evaluate_distances(own, copies.labels).measures["FT"]
-    clean_ft = evaluate_distances(
-        np.abs(clean.signatures[:, None, :] - clean.signatures[None, :, :]).sum(axis=2),
-        clean.labels,
-    ).measures["FT"]
-    return [f"{100 * rank1:.1f}", f"{first:.3f}", f"{clean_ft:.3f}"]
+    nearest = np.argmin(distances(clean.descriptor, copies.signatures, clean.signatures), axis=1)
+    rank1 = float(np.mean(nearest == np.arange(len(nearest))))
+    first = cfsig.evaluate_collections({kind: copies})[kind].report.measures["FT"]
+    return [f"{100 * rank1:.1f}", f"{first:.3f}"]
 
 
 def collection_rows(
@@ -352,12 +345,15 @@ def collection_rows(
                     rows.append([name, kind_name(kind, amount), ranked, report.count, *measures])
                     if kind == "noise":
                         break
-        everything = sorted(indexed + queried)
-        copies = [
-            [name, kind_name(kind, amount), *noise_duplicates(everything, kind, amount, tmp, jobs)]
-            for kind, amount in [("noise", a) for a in amounts.get("noise", ())]
-            + [("shot", SHOT)] * ("noise" in amounts)
-        ]
+        copies = []
+        if "noise" in amounts:
+            everything = sorted(indexed + queried)
+            link(everything, tmp / "clean")
+            clean, _ = cfsig.compute_collection(tmp / "clean", cfsig.Params(), jobs=jobs)
+            clean_ft = cfsig.evaluate_collections({"clean": clean})["clean"].report.measures["FT"]
+            for kind, amount in [("noise", a) for a in amounts["noise"]] + [("shot", SHOT)]:
+                found = noise_duplicates(clean, everything, kind, amount, tmp, jobs)
+                copies.append([name, kind_name(kind, amount), *found, f"{clean_ft:.3f}"])
     return out, duplicate, copies
 
 
