@@ -31,14 +31,14 @@ from cfsig.search.l1 import Kernel, choose_kernel, fast_kernel, l1_numpy
 _BLOCK_ROWS = 16384  # rows per block of a dataset that is not chunked
 _OUT_CELLS = 1 << 20  # distances computed per kernel call (4 MB): bounds memory for many queries
 PRUNE_MIN_ROWS = 50_000  # rows with sketches from which a search prunes: docs/performance.md
-_BOUND_CELLS = 1 << 25  # bounds held at once (128 MB): the queries of one scan of the sketches
+_BOUND_CELLS = 1 << 27  # bounds held at once (512 MB): the queries of one scan of the sketches
 _FIRST = 1024  # rows of smallest bounds evaluated first per query (at least 4 k)
 _SAMPLE = 65536  # bounds sampled to find the cutoff of those rows
 _SCAN_RATIO = 4  # a full scan when the candidates are a quarter of the rows or more
 _EXACT_BATCH = 64  # rows of smallest bounds whose exact distances are computed at a time
 # Queries from which a group is searched together, block by block (`_Pruned._many`): a group of
 # as many reads the rows twice for all, fewer reads a query than one query at a time up to
-# about 500,000 rows (groups of 64 or more; docs/method.md).
+# about 2,000,000 rows (groups of 64 or more; docs/method.md).
 _MANY = 64
 _FIRST_MANY = 64  # rows of smallest bounds evaluated first per query there (at least 4 k)
 _SAMPLE_MANY = 8192  # bounds per query sampled there to find the cutoff of those rows
@@ -286,11 +286,15 @@ class _Pruned:
         sample = np.ascontiguousarray(bounds[::step].T)
         nth = min(-(-2 * max(_FIRST_MANY, 4 * self.best.k) // step), sample.shape[1]) - 1
         cutoffs = np.partition(sample, nth, axis=1)[:, nth]
-        picked = ~(bounds > cutoffs)
+        # The masks are (rows, q) like the bounds: each is made in place, in one buffer each.
+        picked = np.greater(bounds, cutoffs)
+        np.logical_not(picked, out=picked)  # NaN bounds too: they rule nothing out
         picked[self.excluded] = False
         self._pairs(q0, queries, picked)
         limits = [threshold(self.best.kth(q0 + j), self.width) for j in range(len(queries))]
-        left = ~(bounds > np.array(limits, np.float32)) & ~picked  # NaN bounds rule nothing out
+        left = np.greater(bounds, np.array(limits, np.float32))
+        np.logical_or(left, picked, out=left)
+        np.logical_not(left, out=left)
         left[self.excluded] = False
         if np.count_nonzero(left) * _SCAN_RATIO >= self.live * len(queries):
             _scan(self.views, queries, self.kernel, self.best, q0)  # reads less than they would
