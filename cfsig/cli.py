@@ -833,7 +833,7 @@ def info(index_file, as_json) -> None:
 @click.option(
     "--below",
     type=click.FloatRange(min=0, min_open=True),
-    help="Join entries closer than this [0.43, for the intrinsic descriptor; others: give it].",
+    help="Join entries closer than this [0.2, for the intrinsic descriptor; others: give it].",
 )
 @click.option(
     "--top", type=click.IntRange(min=1), help="Instead: list each entry's K nearest others."

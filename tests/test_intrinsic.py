@@ -96,6 +96,24 @@ def test_invariant_to_rigid_motion_and_scale():
     assert np.abs(moved - base).sum() < 1e-6 * np.abs(base).sum()
 
 
+def test_a_simplified_mesh_is_invariant_to_rigid_motion_scale_and_numbering():
+    """A mesh beyond `COARSE` faces, turned, scaled, moved and listed in another order: its
+    copy is simplified from the same numbers (`cfsig.repair.simplify`), so the vector is the
+    same to round-off (numbered by position in the mesh's own pose, the copies moved it by
+    0.2 to 0.6, a fifth of the distance to the other bump)."""
+    v, f = _bumpy(levels=5)  # 20,480 faces
+    assert len(f) > intrinsic.COARSE
+    base = _vector(v, f)
+    rng = np.random.default_rng(1)
+    order = rng.permutation(len(v))  # vertex i is listed at order[i]
+    for rotation, scale, shift in ((random_rotation(7), 0.2, [5.0, 1.0, -2.0]),
+                                   (random_rotation(8), 3.0, [0.0, -40.0, 0.5])):  # fmt: skip
+        moved = np.empty_like(v)
+        moved[order] = scale * v @ rotation.T + shift
+        faces = order[f][rng.permutation(len(f))]
+        assert np.abs(_vector(moved, faces) - base).sum() < 1e-8 * np.abs(base).sum()
+
+
 def test_distance_separates_shapes():
     v, f = _bumpy()
     base = _vector(v, f)

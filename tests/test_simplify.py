@@ -5,7 +5,7 @@ from cfsig.files.elements import mesh_edges
 from cfsig.files.mesh import clean_mesh
 from cfsig.params import Params
 from cfsig.repair.simplify import decimate, simplified_mesh
-from tests.helpers import icosphere
+from tests.helpers import icosphere, random_rotation
 
 
 def test_decimate_reaches_the_count_and_keeps_the_shape():
@@ -31,6 +31,21 @@ def test_the_copy_does_not_depend_on_the_numbering():
         assert np.array_equal(a, b)
     one, other = (compute_signature(clean_mesh(*m), Params()) for m in ((v, f), (listed, faces)))
     assert np.array_equal(one.vector, other.vector)
+
+
+def test_the_copy_turns_moves_and_scales_with_the_mesh():
+    """Simplified in the mesh's own frame: a turned, scaled and moved mesh gives the same copy,
+    turned, scaled and moved alike (its faces the same), mirrored too; to the 30 bits the frame
+    is rounded to."""
+    v, f = icosphere(4)
+    rng = np.random.default_rng(0)
+    v = v * [1.0, 0.7, 0.4] * (1 + 0.1 * rng.random((len(v), 1)))
+    vertices, faces = decimate(v, f, 1000)
+    rotation, shift = random_rotation(5), np.array([2.0, -3.0, 0.5])
+    for turn in (rotation, rotation * [1.0, 1.0, -1.0]):  # a turn and a mirror image
+        moved, same = decimate(2.5 * v @ turn.T + shift, f, 1000)
+        assert np.array_equal(same, faces)
+        np.testing.assert_allclose(moved, 2.5 * vertices @ turn.T + shift, rtol=0, atol=1e-7)
 
 
 def test_decimate_leaves_a_small_mesh_alone():

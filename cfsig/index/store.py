@@ -1,6 +1,6 @@
 """The index: a folder of immutable segment files behind a small manifest replaced atomically.
 
-Layout (format version 4, docs/index-format.md): ``INDEX/manifest.h5`` holds the header
+Layout (format version 5, docs/index-format.md): ``INDEX/manifest.h5`` holds the header
 (``format`` "cfsig-index", ``format_version``, ``params`` and ``layout`` as JSON,
 ``cfsig_version``, the time of the commit, the count of rows of each class) and the
 list of segments with their row counts and file checksums; each ``INDEX/seg-NNNNNNNN.h5``
@@ -58,7 +58,7 @@ from cfsig.index.sketch import Sketch
 from cfsig.params import Layout, Params
 
 FORMAT = "cfsig-index"
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 MANIFEST = "manifest.h5"
 LOCK = "lock"
 REBUILD = "rebuild it: cfsig index FOLDER -o NEW_INDEX"
@@ -1384,7 +1384,7 @@ def _not_a_folder(path: Path) -> NoReturn:
 
 def _made_by(params: object, version: int) -> str:
     """What an index of an older format was made with, in words, from its stored parameters."""
-    if version >= 3:  # format 3 differs in its manifest only: its descriptors are today's
+    if version >= 3:  # formats 3 and 4 name today's descriptors, computed otherwise
         return f"made by an older cfsig, in index format {version}"
     try:
         data = json.loads(str(params))

@@ -19,7 +19,7 @@ from cfsig.search.nearest import Hit, group_size, hits, search, without_self
 
 BATCH = 4096  # entries searched at a time at most
 _FIRST_K = 8  # neighbours asked per entry by `duplicate_groups`, then more where all are close
-BELOW = 0.43  # the default threshold, for the default descriptor: docs/guide.md says why
+BELOW = 0.2  # the default threshold, for the default descriptor: docs/guide.md says why
 
 Progress = Callable[[int], None]  # called with the number of entries done since the last call
 
