@@ -72,15 +72,67 @@ def test_panoramas_of_a_cylinder():
     assert np.all(images <= 1) and np.all(images >= 0)
 
 
-def test_folded_spectra_ignore_shifts_reversals_and_mirrors():
+def _turned_and_reversed(image):
+    """The copies of a panorama that the axes' signs and mirrors make of it."""
+    return (
+        np.roll(image, panorama.ANGLES // 2, axis=0),  # a half turn about the axis
+        image[::-1],  # the azimuth reversed
+        image[:, ::-1],  # the axis reversed
+        np.roll(image[::-1, ::-1], panorama.ANGLES // 2, axis=0),
+    )
+
+
+def test_folded_spectra_ignore_half_turns_reversals_and_mirrors_not_other_turns():
+    """The absolute parts keep the phase about the image's centre: the half turns and reversals
+    that the axes' signs make leave them as they are, a turn by a few cells does not."""
     rng = np.random.default_rng(1)
     image = rng.random((panorama.ANGLES, panorama.HEIGHTS))
     spectra = panorama.folded_spectra(image)
-    assert spectra.shape == (panorama.ANGULAR + 1, 2 * panorama.AXIAL + 1)
-    for other in (
-        np.roll(image, 5, axis=0),  # a turn about the axis
-        np.roll(image[::-1, ::-1], 1, axis=0),  # the axis reversed
-        np.roll(image[::-1], 1, axis=0),  # a mirror through a plane holding the axis
-    ):
+    assert spectra.shape == (panorama.PARTS, panorama.ANGULAR + 1, 2 * panorama.AXIAL + 1)
+    for other in _turned_and_reversed(image):
         np.testing.assert_allclose(panorama.folded_spectra(other), spectra, atol=1e-12)
+    assert np.abs(panorama.folded_spectra(np.roll(image, 5, axis=0)) - spectra).max() > 1e-4
     assert spectra.sum() == pytest.approx(1.0) and np.all(spectra >= 0)
+
+
+def test_a_centred_image_has_no_imaginary_part():
+    """An image symmetric about its centre has a real transform about it."""
+    rng = np.random.default_rng(2)
+    half = rng.random((panorama.ANGLES, panorama.HEIGHTS))
+    image = half + half[::-1, ::-1]
+    spectra = panorama.folded_spectra(image)
+    assert np.abs(spectra[1]).max() < 1e-12 and spectra[0].sum() == pytest.approx(1.0)
+
+
+def test_haar_subbands_keep_the_energy_and_find_the_finest_detail():
+    """The transform is orthonormal: its subbands hold the image's energy. An image alternating
+    along the azimuth only is all in the finest detail along it."""
+    rng = np.random.default_rng(3)
+    image = rng.random((panorama.ANGLES, panorama.HEIGHTS))
+    bands = panorama.haar_subbands(image)
+    assert len(bands) == panorama.SUBBANDS
+    assert bands[-1].shape == (
+        panorama.ANGLES >> panorama.LEVELS,
+        panorama.HEIGHTS >> panorama.LEVELS,
+    )
+    assert sum(float((b**2).sum()) for b in bands) == pytest.approx(float((image**2).sum()))
+    stripes = np.repeat((np.arange(panorama.ANGLES) % 2)[:, None], panorama.HEIGHTS, axis=1)
+    moments = panorama.wavelet_moments(stripes.astype(float))
+    np.testing.assert_allclose(moments[1], [1.0, 0.0, 0.0], atol=1e-12)  # along the azimuth
+    others = np.delete(np.arange(panorama.SUBBANDS - 1), 1)
+    np.testing.assert_allclose(moments[others, :2], 0.0, atol=1e-12)
+    assert moments[-1, 0] == pytest.approx(0.5 * 2**panorama.LEVELS)  # the mean, 2x a level
+
+
+def test_wavelet_features_ignore_half_turns_reversals_and_mirrors():
+    """The moments of the absolute coefficients: the half turns and reversals only permute the
+    coefficients and change their signs. A constant subband has no skewness."""
+    rng = np.random.default_rng(4)
+    image = rng.random((panorama.ANGLES, panorama.HEIGHTS)) ** 3
+    features = panorama.wavelet_features(image)
+    assert features.shape == (panorama.SUBBANDS, panorama.MOMENTS)
+    for other in _turned_and_reversed(image):
+        np.testing.assert_allclose(panorama.wavelet_features(other), features, atol=1e-12)
+    flat = panorama.wavelet_features(np.full((panorama.ANGLES, panorama.HEIGHTS), 0.5))
+    details = panorama.WAVELET_WEIGHT * np.log([panorama.FLOOR, panorama.FLOOR, 1.0])
+    np.testing.assert_allclose(flat[:-1], np.broadcast_to(details, flat[:-1].shape))

@@ -155,16 +155,18 @@ def test_signature_goes_through_the_repair_stage():
         assert np.array_equal(sig.vector[FLOATS:], np.round(sig.vector[FLOATS:]))
 
 
-def test_an_index_of_an_earlier_rigid_is_refused(tmp_path):
+@pytest.mark.parametrize("earlier", [2661, 7217])
+def test_an_index_of_an_earlier_rigid_is_refused(tmp_path, earlier):
     """An index whose rows another version of the descriptor made (``rigid`` kept 2,661
-    entries a row before the panorama) is refused in one line that says how to rebuild it, by
-    a query, an evaluation and a writer alike."""
+    entries a row before the panorama, 7,217 before its wavelet features and real and
+    imaginary parts) is refused in one line that says how to rebuild it, by a query, an
+    evaluation and a writer alike."""
     two_classes(tmp_path / "data")
     index = tmp_path / "index"
     runner = CliRunner()
     args = ["index", str(tmp_path / "data"), "-o", str(index), "--descriptor", "rigid"]
     assert runner.invoke(main, args).exit_code == 0
-    write_manifest(index, replace(read_manifest(index), layout=Layout(2661)))
+    write_manifest(index, replace(read_manifest(index), layout=Layout(earlier)))
     for command in (
         ["query", str(index), str(tmp_path / "data/long/a.off")],
         ["evaluate", "--index", str(index)],

@@ -15,20 +15,29 @@ The steps, and where cfsig departs from the paper (docs/method.md):
   meets the surface last: its distance from the axis over the radius (the paper's SDM, clipped
   to 1) and the absolute cosine between its normal and the ray (NDM). The paper casts rays;
   samples are cheaper and leave a cell without surface at 0, as a ray that meets none.
-- Features (`folded_spectra`): the magnitudes of each image's 2-D discrete Fourier transform at
-  azimuthal frequencies 0 to `ANGULAR` and height frequencies -`AXIAL` to `AXIAL`, over their
-  sum. A turn about the axis shifts the image along the azimuth, which the magnitudes ignore;
-  reversing the axis reverses both coordinates, which a real image's magnitudes ignore too. A
-  mirror reverses one, exchanging the frequencies (k, l) and (k, -l): each such pair is kept as
-  its larger and smaller magnitude, so mirrored copies agree as well. The paper's wavelet
-  features are not computed.
+- Spectra (`folded_spectra`): the absolute real and imaginary parts of each image's 2-D
+  discrete Fourier transform at azimuthal frequencies 0 to `ANGULAR` and height frequencies
+  -`AXIAL` to `AXIAL`, as the paper keeps them, each image's over their sum, the phase taken
+  about the image's centre. The pose fixes the azimuth's origin up to the axes' signs, which
+  turn an image by half a turn (multiplying frequency k by (-1)^k) or reverse its azimuth or
+  height (taking G(k, l) to G(k, -l) or to its conjugate), as a mirror does: each pair (k, l),
+  (k, -l) is kept as its larger and smaller absolute part, so that turned and mirrored copies
+  agree.
+- Wavelets (`wavelet_features`), as the paper adds them: the mean, standard deviation and
+  skewness of the absolute coefficients of each subband of a `LEVELS`-level 2-D Haar transform
+  of each image, periodic along the azimuth (the paper's Haar and D4 give way to Haar alone,
+  whose subbands the half turn and the reversals above only permute and change the signs
+  of). Their logarithms (the skewness's inverse hyperbolic sine) compare by L1 where the
+  paper's Canberra distance compares their ratios, weighed against the spectra by
+  `WAVELET_WEIGHT`.
 - Distance (`panorama_distances`): the smallest, over the 2 x 2 pairs of frames and the 6
   orders of the axes, of the L1 distances of the paired axes' features: the axes' order is
   unstable when second moments are close, as the light field's views are for the
   dodecahedron's rotations, and either frame can be the one that finds a shape's pose.
 
-The features are ``FRAMES x AXES x MAPS x (ANGULAR + 1) x (2 AXIAL + 1)`` values, frame by frame,
-axis by axis.
+The features are ``FRAMES x AXES x BLOCK`` values, frame by frame, axis by axis: each axis's
+``MAPS x PARTS x (ANGULAR + 1) x (2 AXIAL + 1)`` spectra, then its ``MAPS x SUBBANDS x MOMENTS``
+wavelet features. docs/method.md tells how the constants were chosen.
 """
 
 from __future__ import annotations
@@ -49,7 +58,16 @@ RADIUS = 3.0  # of each cylinder, in mean distances of the surface from its cent
 POINTS = 1 << 16  # surface samples projected, at most
 ANGULAR = 16  # azimuthal frequencies 0..ANGULAR
 AXIAL = 12  # height frequencies -AXIAL..AXIAL
-BLOCK = MAPS * (ANGULAR + 1) * (2 * AXIAL + 1)  # features per axis
+PARTS = 2  # the real and imaginary parts of the transform
+SPECTRUM = MAPS * PARTS * (ANGULAR + 1) * (2 * AXIAL + 1)  # spectral features per axis
+LEVELS = 6  # of the Haar transform: 2 ** LEVELS divides ANGLES and HEIGHTS
+SUBBANDS = 3 * LEVELS + 1  # three of details a level, then the last approximation
+MOMENTS = 3  # mean, standard deviation and skewness of a subband's absolute coefficients
+WAVELETS = MAPS * SUBBANDS * MOMENTS  # wavelet features per axis
+FLOOR = 0.3  # added to the mean and standard deviation before their logarithm
+WAVELET_WEIGHT = 0.041  # of the wavelet features, against the spectra's
+BLOCK = SPECTRUM + WAVELETS  # features per axis
+_HALF = np.sqrt(0.5)  # the Haar filters' taps
 LENGTH = FRAMES * AXES * BLOCK
 
 
@@ -108,7 +126,8 @@ def panoramas(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
 
 
 def folded_spectra(images: np.ndarray) -> np.ndarray:
-    """The magnitudes of images' 2-D Fourier transforms at low frequencies, mirrors folded.
+    """The absolute real and imaginary parts of images' 2-D Fourier transforms at low
+    frequencies, about the images' centres, mirrors folded.
 
     Parameters
     ----------
@@ -117,19 +136,97 @@ def folded_spectra(images: np.ndarray) -> np.ndarray:
 
     Returns
     -------
-    spectra : (..., ANGULAR + 1, 2 AXIAL + 1) float64
-        For azimuthal frequency k: ``|F(k, 0)|``, then ``max(|F(k, l)|, |F(k, -l)|)`` for l = 1
-        to `AXIAL`, then the ``min`` of the same pairs; each image's over their sum (zero for
-        an empty image).
+    spectra : (..., PARTS, ANGULAR + 1, 2 AXIAL + 1) float64
+        Part p (real, imaginary) at azimuthal frequency k, of the transform ``G(k, l)`` with
+        phases about the centre ``((ANGLES - 1) / 2, (HEIGHTS - 1) / 2)``: ``|p G(k, 0)|``,
+        then ``max(|p G(k, l)|, |p G(k, -l)|)`` for l = 1 to `AXIAL`, then the ``min`` of the
+        same pairs; each image's over their sum (zero for an empty image).
     """
-    magnitudes = np.abs(np.fft.fft2(images)[..., : ANGULAR + 1, :])
-    up = magnitudes[..., 1 : AXIAL + 1]
-    down = magnitudes[..., -1 : -AXIAL - 1 : -1]
-    spectra = np.concatenate(
-        [magnitudes[..., :1], np.maximum(up, down), np.minimum(up, down)], axis=-1
-    )
-    total = spectra.sum(axis=(-2, -1), keepdims=True)
+    angles, heights = images.shape[-2:]
+    azimuthal = np.arange(ANGULAR + 1)[:, None] * ((angles - 1) / angles)
+    axial = np.fft.fftfreq(heights, 1 / heights)[None, :] * ((heights - 1) / heights)
+    centred = np.fft.fft2(images)[..., : ANGULAR + 1, :] * np.exp(1j * np.pi * (azimuthal + axial))
+    parts = np.abs(np.stack([centred.real, centred.imag], axis=-3))
+    up = parts[..., 1 : AXIAL + 1]
+    down = parts[..., -1 : -AXIAL - 1 : -1]
+    spectra = np.concatenate([parts[..., :1], np.maximum(up, down), np.minimum(up, down)], axis=-1)
+    total = spectra.sum(axis=(-3, -2, -1), keepdims=True)
     return np.divide(spectra, total, out=np.zeros_like(spectra), where=total > 0)
+
+
+def haar_subbands(images: np.ndarray) -> list[np.ndarray]:
+    """The subbands of images' orthonormal 2-D Haar transform, `LEVELS` levels deep.
+
+    Parameters
+    ----------
+    images : (..., ANGLES, HEIGHTS) float64
+        Panoramas; both sides divisible by ``2 ** LEVELS``.
+
+    Returns
+    -------
+    subbands : list of SUBBANDS arrays (..., a, h) float64
+        Level by level from the finest, the details along the height, along the azimuth and
+        along both (a, h halved at each level), then the last approximation.
+    """
+    subbands = []
+    low = images
+    for _ in range(LEVELS):
+        even, odd = low[..., ::2, :], low[..., 1::2, :]
+        smooth, sharp = (even + odd) * _HALF, (even - odd) * _HALF
+        subbands += [
+            (smooth[..., ::2] - smooth[..., 1::2]) * _HALF,
+            (sharp[..., ::2] + sharp[..., 1::2]) * _HALF,
+            (sharp[..., ::2] - sharp[..., 1::2]) * _HALF,
+        ]
+        low = (smooth[..., ::2] + smooth[..., 1::2]) * _HALF
+    return [*subbands, low]
+
+
+def wavelet_moments(images: np.ndarray) -> np.ndarray:
+    """The moments of the absolute coefficients of each of images' `haar_subbands`.
+
+    Parameters
+    ----------
+    images : (..., ANGLES, HEIGHTS) float64
+        Panoramas.
+
+    Returns
+    -------
+    moments : (..., SUBBANDS, MOMENTS) float64
+        Each subband's mean, standard deviation and skewness (0 where the deviation is below
+        1e-9, as for a constant subband).
+    """
+    coefficients = [np.abs(band).reshape(*band.shape[:-2], -1) for band in haar_subbands(images)]
+    out = []
+    for band in coefficients:
+        mean = band.mean(axis=-1)
+        deviation = band - mean[..., None]
+        spread = np.sqrt((deviation**2).mean(axis=-1))
+        third = (deviation**3).mean(axis=-1)
+        skew = np.divide(third, spread**3, out=np.zeros_like(third), where=spread > 1e-9)
+        out.append(np.stack([mean, spread, skew], axis=-1))
+    return np.stack(out, axis=-2)
+
+
+def wavelet_features(images: np.ndarray) -> np.ndarray:
+    """The wavelet features of images: their `wavelet_moments` on a logarithmic scale.
+
+    Parameters
+    ----------
+    images : (..., ANGLES, HEIGHTS) float64
+        Panoramas.
+
+    Returns
+    -------
+    features : (..., SUBBANDS, MOMENTS) float64
+        `WAVELET_WEIGHT` times ``log(FLOOR + mean)``, ``log(FLOOR + deviation)`` and
+        ``arcsinh(skewness)``.
+    """
+    moments = wavelet_moments(images)
+    logarithms = np.concatenate(
+        [np.log(FLOOR + moments[..., :2]), np.arcsinh(moments[..., 2:])], axis=-1
+    )
+    return WAVELET_WEIGHT * logarithms
 
 
 def panorama_features(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
@@ -146,18 +243,19 @@ def panorama_features(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
     Returns
     -------
     features : (LENGTH,) float64
-        `folded_spectra` of the `panoramas` of the samples, scaled to a mean distance of 1
-        from the centroid, in the frame of the `principal_axes` of the samples, then in that
-        of their normals'; frame by frame, axis by axis by decreasing second moment, the
-        distance map before the orientation map.
+        The `panoramas` of the samples, scaled to a mean distance of 1 from the centroid, in the
+        frame of the `principal_axes` of the samples, then in that of their normals'; frame by
+        frame, axis by axis by decreasing second moment: the `folded_spectra` of the axis's
+        distance map and orientation map, then their `wavelet_features`.
     """
     step = -(-len(points) // POINTS)
     points, normals = points[::step], normals[::step]
     points = points / max(float(np.linalg.norm(points, axis=1).mean()), np.finfo(float).tiny)
-    features = [
-        folded_spectra(panoramas(points @ axes, normals @ axes))
-        for axes in (principal_axes(points), principal_axes(normals))
-    ]
+    features = []
+    for axes in (principal_axes(points), principal_axes(normals)):
+        images = panoramas(points @ axes, normals @ axes)
+        spectra = folded_spectra(images).reshape(AXES, SPECTRUM)
+        features.append(np.hstack([spectra, wavelet_features(images).reshape(AXES, WAVELETS)]))
     return np.concatenate(features, axis=None)
 
 
