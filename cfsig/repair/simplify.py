@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from cfsig.errors import MeshError
+from cfsig.files.elements import edge_lengths, face_areas
 from cfsig.files.mesh import Mesh, clean_mesh
 
 # The grid the coordinates are rounded to in the mesh's own frame, where the square root of
@@ -82,9 +83,7 @@ def canonical_frame(
         positive. A surface with two equal moments (a body of revolution) or none along an axis
         (a mirror image of itself) leaves them to round-off. The three are rounded to 30 bits.
     """
-    first = vertices[faces[:, 0]]
-    normal = np.cross(vertices[faces[:, 1]] - first, vertices[faces[:, 2]] - first)
-    areas = np.sqrt(np.einsum("ij,ij->i", normal, normal)) / 2
+    areas = face_areas(edge_lengths(vertices, faces))
     # Each face's area shared among its corners: the surface's moments, lumped at the vertices.
     weights = np.bincount(faces.ravel(), np.repeat(areas / 3, 3), len(vertices))
     total = float(weights.sum())
