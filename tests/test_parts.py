@@ -1,6 +1,7 @@
 """Tests for cfsig.search.partial and evaluate_queries: partial queries against whole shapes."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,11 +13,12 @@ from cfsig.descriptors import layout
 from cfsig.descriptors.parts import (
     SHARES,
     curvature_columns,
+    one_sidedness,
     partial_file,
     partial_vectors,
     share_curvatures,
 )
-from cfsig.descriptors.signature import compute_signature
+from cfsig.descriptors.signature import compute_signature, signature_file
 from cfsig.errors import PartialError
 from cfsig.evaluation import collections
 from cfsig.evaluation.collections import evaluate_partial
@@ -25,7 +27,12 @@ from cfsig.files.mesh import clean_mesh
 from cfsig.index.store import IndexReader
 from cfsig.params import Params
 from cfsig.search.partial import (
+    CANDIDATES,
+    CLOSED_SCALE,
     HISTOGRAM_WEIGHT,
+    candidates,
+    expanded_distances,
+    fused_scores,
     partial_distances,
     partial_scores,
     query_part,
@@ -207,3 +214,74 @@ def test_partial_query_of_an_old_index_is_refused(tmp_path, wholes):
     result = CliRunner().invoke(main, ["query", str(index), str(part), "--partial"])
     assert result.exit_code != 0 and "build one with" in result.output
     assert "Traceback" not in result.output and len(result.output.strip().splitlines()) == 1
+
+
+def test_fused_scores_weigh_the_closed_distance_by_how_near_it_comes():
+    partial = np.array([1.0, 1.2, 2.0])
+    assert np.array_equal(fused_scores(partial, None), partial)
+    # The closed part is one of the wholes: that whole stands for the part.
+    assert np.argmin(fused_scores(partial, np.array([3.0, 0.0, 3.0]))) == 1
+    # It lies far from every whole: the partial distance decides.
+    far = 50 * CLOSED_SCALE + np.array([0.5, 0.0, 0.5])
+    assert np.argmin(fused_scores(partial, far)) == 0
+    # Near one: it decides against a small lead of the partial distance.
+    near = CLOSED_SCALE * np.array([1.0, 0.2, 1.0])
+    assert np.argmin(fused_scores(partial, near)) == 1
+    # The partial distance counts relative to its least: its unit does not matter.
+    assert np.allclose(fused_scores(7 * partial, near), fused_scores(partial, near))
+
+
+def test_candidates_are_the_nearest_by_each_measure():
+    partial = np.arange(100.0)
+    assert np.array_equal(candidates(partial, None), np.arange(CANDIDATES))
+    both = candidates(partial, partial[::-1].copy())
+    assert np.array_equal(both, np.r_[0:CANDIDATES, 100 - CANDIDATES : 100])
+
+
+def test_a_part_is_also_measured_closed_as_its_file_is_computed(wholes):
+    root, _ = wholes
+    path = root / "parts" / "torus" / "cut.off"
+    part = partial_file(path, DEFAULT)
+    assert part.closed is not None
+    assert np.array_equal(part.closed, signature_file(path, DEFAULT).vector)
+
+
+def test_a_partial_query_ranks_the_index_as_in_memory(wholes):
+    root, index = wholes
+    with IndexReader(index) as reader:
+        signatures, cells = reader.signatures[:], reader.cells()
+        for name in ("torus", "bumpy"):
+            part = partial_file(root / "parts" / name / "cut.off", reader.params)
+            hits, _ = query_part(reader, part, 8)
+            in_memory = expanded_distances(part, signatures, reader.params, cells)
+            order = np.argsort(in_memory, kind="stable")
+            assert [h.entry for h in hits] == reader.entries(order[: len(hits)])
+
+
+def test_a_single_view_is_one_sided_and_a_closed_surface_is_not():
+    v, f = icosphere(3)
+    upper = f[v[f].mean(axis=1)[:, 2] > 0.05]  # a cap seen from above: every face turns up
+    assert one_sidedness(clean_mesh(v, upper)) == 1.0
+    assert one_sidedness(clean_mesh(v, f)) < 0.05
+    half = f[v[f].mean(axis=1)[:, 0] < 0.3]  # a cut that wraps around: faces turn many ways
+    assert 0.2 < one_sidedness(clean_mesh(v, half)) < 0.9
+
+
+def test_a_single_view_is_ranked_by_its_closed_distance():
+    partial, closed = np.array([1.0, 3.0]), CLOSED_SCALE * np.array([9.0, 8.0])
+    assert np.argmin(fused_scores(partial, closed)) == 0
+    assert np.argmin(fused_scores(partial, closed, one_sided=1.0)) == 1
+
+
+def test_a_part_whose_closed_copy_is_a_whole_ranks_that_whole_first(wholes):
+    root, index = wholes
+    with IndexReader(index) as reader:
+        signatures, cells = reader.signatures[:], reader.cells()
+        part = partial_file(root / "parts" / "torus" / "cut.off", reader.params)
+        sphere = int(reader.find(["sphere/0.off"])[0])
+        part = replace(part, closed=signatures[sphere].astype(np.float64))
+        hits, _ = query_part(reader, part, 8)
+        assert hits[0].entry.label == "sphere" and hits[0].distance == 0.0
+        in_memory = expanded_distances(part, signatures, reader.params, cells)
+        order = np.argsort(in_memory, kind="stable")
+        assert [h.entry for h in hits] == reader.entries(order[: len(hits)])

@@ -7,8 +7,11 @@ same scale. That scale is relative to the whole's area, which a part does not kn
 is measured for each share ``f`` of `SHARES`: diffusion times ``s * area / f`` and values divided
 by ``f``, as if its whole had the area ``area / f``. An index built with `Params.partial_cells`
 keeps beside each whole's vector its fine curvature cells (`cfsig.descriptors.cells`): a part is
-then measured at the 13 `FINE_SHARES` as cells instead. `cfsig.search.partial` ranks the wholes
-by what is measured here.
+then measured at the 13 `FINE_SHARES` as cells instead.
+
+A part that holds most of its whole is better told by its whole-shape signature once its holes
+are closed: so a part is also measured as a whole, through the repair stage like any file
+(`closed_vector`). `cfsig.search.partial` ranks the wholes by what is measured here.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import numpy as np
 
 from cfsig.descriptors import intrinsic
 from cfsig.descriptors.cells import cell_histogram
+from cfsig.descriptors.signature import compute_signature
 from cfsig.errors import MeshError, PartialError, SolverError
 from cfsig.files.mesh import Mesh, read_mesh
 from cfsig.operators.conformal import Operators, operators
@@ -48,10 +52,18 @@ class Part:
         `cfsig.descriptors.cells.cell_histogram` of all its scales at each share of `FINE_SHARES`:
         cells
         (c,) int64 ascending, fractions (c,) float64 summing to 1; None for the others.
+    closed : (intrinsic.LENGTH,) float64 or None
+        `closed_vector`: the part's whole-shape signature with its holes closed; None when the
+        repair stage or the solver could not make one.
+    one_sided : float
+        `one_sidedness`, in [0, 1]: 1 for a part every face of which faces one way, as a
+        single view does.
     """
 
     vectors: np.ndarray | None = None
     cells: tuple[tuple[np.ndarray, np.ndarray], ...] | None = None
+    closed: np.ndarray | None = None
+    one_sided: float = 0.0
 
 
 def measure_part(mesh: Mesh, params: Params) -> Part:
@@ -68,7 +80,7 @@ def measure_part(mesh: Mesh, params: Params) -> Part:
     -------
     part : Part
         Its fine cells at `FINE_SHARES` when ``params`` keep fine cells, else its
-        `partial_vectors`.
+        `partial_vectors`; and its `closed_vector`.
 
     Raises
     ------
@@ -78,11 +90,66 @@ def measure_part(mesh: Mesh, params: Params) -> Part:
         A curvature diffusion failed.
     """
     curvature_columns(params)
+    closed, one_sided = closed_vector(mesh, params), one_sidedness(mesh)
     if not params.partial_cells:
-        return Part(vectors=partial_vectors(mesh, params))
+        return Part(partial_vectors(mesh, params), None, closed, one_sided)
     measured = share_curvatures(mesh, params, FINE_SHARES)
     fine = (intrinsic.FINE_BINS, intrinsic.FINE_BAND)
-    return Part(cells=tuple(cell_histogram(v, a, *fine) for v, a in measured))
+    cells = tuple(cell_histogram(v, a, *fine) for v, a in measured)
+    return Part(None, cells, closed, one_sided)
+
+
+def one_sidedness(mesh: Mesh) -> float:
+    """How nearly a part is a single view of a surface: its faces all turned one way.
+
+    With ``a`` the share of the area whose faces turn toward the area-weighted mean normal,
+    ``2 a - 1``: 1 when every face does, as in a depth sensor's single view (every face it
+    sees faces it); near 0 for a closed surface or a part that wraps around its object.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The part.
+
+    Returns
+    -------
+    one_sided : float
+        In [0, 1].
+    """
+    corners = mesh.vertices[mesh.faces]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    areas = np.linalg.norm(normals, axis=1)
+    mean = normals.sum(axis=0)
+    if not (areas.sum() > 0 and np.linalg.norm(mean) > 0):
+        return 0.0
+    facing = areas[normals @ mean > 0].sum() / areas.sum()
+    return float(np.clip(2 * facing - 1, 0.0, 1.0))
+
+
+def closed_vector(mesh: Mesh, params: Params) -> np.ndarray | None:
+    """The whole-shape signature of a part whose holes the repair stage closes.
+
+    It is what ``cfsig compute`` gives for the part's file: the repair stage closes its cuts
+    and holes (`cfsig.repair.stage.repair_mesh`) and the ``intrinsic`` vector is computed on
+    that closed surface.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The part; its boundary may be open.
+    params : Params
+        The index's parameters.
+
+    Returns
+    -------
+    vector : (intrinsic.LENGTH,) float64 or None
+        None when the repair stage or the solver fails on the part: it is then ranked by its
+        curvature alone.
+    """
+    try:
+        return compute_signature(mesh, params).vector
+    except (MeshError, SolverError):
+        return None
 
 
 def curvature_columns(params: Params) -> slice:

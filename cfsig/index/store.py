@@ -329,7 +329,7 @@ class IndexReader:
             picked = slice(int(order[0]), int(order[-1]) + 1) if run else order
             read = data.asstr()[picked] if data.dtype.kind == "O" else data[picked]
             parts.append((np.flatnonzero(seg == i), read[np.searchsorted(order, want)]))
-        width = self.signatures.shape[1:] if key == "signatures" else ()
+        width = parts[0][1].shape[1:] if parts else ()
         out = np.empty((len(rows), *width), object if not parts else parts[0][1].dtype)
         for where, values in parts:
             out[where] = values
@@ -423,6 +423,24 @@ class IndexReader:
             for i, dtype in enumerate(CELLS.values())
         )
         return cells, fractions
+
+    def cells_at(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """The fine curvature cells and fractions of some rows, reading only those rows.
+
+        Parameters
+        ----------
+        rows : (k,) int
+            Row numbers, in any order.
+
+        Returns
+        -------
+        cells : ((k, slots) uint16, (k, slots) float32) or None
+            As `cells`, in the order of ``rows``; None when the index keeps none.
+        """
+        if not self.layout.cells:
+            return None
+        rows = np.asarray(rows, dtype=np.int64)
+        return self._gather("cells", rows), self._gather("cell_fractions", rows)
 
 
 class Signatures:

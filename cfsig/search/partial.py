@@ -6,8 +6,13 @@ terms (`partial_scores`): the share of the part's histograms that the whole's ca
 part is a subset of its whole's surface), and their L1 distance. With fine cells
 (`Params.partial_cells`) every row's cells are read and scored (`cfsig.search.cells`).
 
-The nearest whole then stands for the part (query expansion): the others are ranked by their
-whole-shape distance to it, so a part finds the relatives of its whole as a whole would.
+The whole that stands for the part is the one of least `fused_scores` among the `CANDIDATES`
+nearest by partial distance and the `CANDIDATES` nearest to the part with its holes closed
+(`cfsig.descriptors.parts.closed_vector`) by whole-shape distance: the closer the closed part
+lies to some whole, the more that distance counts, and the more nearly the part is a single
+view, the less its partial distance does. That whole then stands for the part (query
+expansion): the others are ranked by their whole-shape distance to it, so a part finds the
+relatives of its whole as a whole would.
 """
 
 from __future__ import annotations
@@ -30,10 +35,18 @@ from cfsig.search.nearest import Hit, l1_distances, nearest, parallel
 # The L1 distance's weight beside the unexplained share in `partial_scores`: chosen on SHREC 2007
 # alone, the best mean NN of its three kinds of parts (docs/method.md, "Partial queries").
 HISTOGRAM_WEIGHT = 1.0
+# Wholes that each of the two measures puts forward to `fused_scores` (`candidates`).
+CANDIDATES = 32
+# The closed part's whole-shape distance counts CLOSED_WEIGHT * exp(-d / CLOSED_SCALE) beside
+# its partial distance, d the closed part's distance to its nearest whole: chosen on SHREC 2007
+# alone (docs/method.md, "Partial queries").
+CLOSED_WEIGHT = 1.0
+CLOSED_SCALE = 1.1
 # Rows from which the compiled kernel repays laying out the part's table for it.
 FAST_MIN_ROWS = 500
 # A part's scores of blocks of wholes: ``scorer(cells, fractions)`` as `cell_scores`.
 Scorer = Callable[[np.ndarray, np.ndarray], np.ndarray]
+_FLOOR = 1e-9  # the least distance `fused_scores` divides by: a part equal to a whole scores 0
 _CELL_BLOCK_ROWS = 4096  # rows of fine cells read at a time, as a segment stores them
 _SCORE_ROWS = 512  # rows of fine cells scored at a time: bounds NumPy's scratch memory
 # A thread's space for a block of fine cells: (rows, slots) uint16 cells, float32 fractions.
@@ -44,7 +57,7 @@ _CellTask = tuple[SegmentView, Block, Block, mmap.mmap | None]
 
 
 def query_part(reader: IndexReader, part: Part, k: int = 20) -> tuple[list[Hit], float]:
-    """The whole shapes related to a part: the nearest by its curvature, then its relatives.
+    """The whole shapes related to a part: the one that stands for it, then its relatives.
 
     Parameters
     ----------
@@ -58,8 +71,9 @@ def query_part(reader: IndexReader, part: Part, k: int = 20) -> tuple[list[Hit],
     Returns
     -------
     hits : list of Hit
-        The nearest whole by partial distance first, then the indexed meshes nearest to that
-        whole; each ``distance`` is the whole-shape distance to the first.
+        The whole of least `fused_scores` among the `candidates` first, then the indexed
+        meshes nearest to that whole; each ``distance`` is the whole-shape distance to the
+        first.
     distance : float
         The part's partial distance to the first hit.
 
@@ -70,15 +84,20 @@ def query_part(reader: IndexReader, part: Part, k: int = 20) -> tuple[list[Hit],
     """
     columns = curvature_columns(reader.params)
     if part.cells is not None:
-        found = _nearest_by_cells(reader, part.cells)
+        rows, _ = _nearest_by_cells(reader, part.cells, CANDIDATES)
     else:
         assert part.vectors is not None  # a Part holds one or the other
         score = partial(partial_scores, mass=float(part.vectors[0].sum()))
-        rows, dists = nearest(reader, share_queries(part.vectors), 1, columns, score)
-        found = (int(rows[0, 0]), float(dists[0, 0])) if rows.size else None
-    if found is None:
+        rows = nearest(reader, share_queries(part.vectors), CANDIDATES, columns, score)[0][0]
+    if not len(rows):
         return [], float("nan")
-    first, fit = found
+    if part.closed is not None:
+        rows = np.union1d(rows, nearest(reader, part.closed[None], CANDIDATES)[0][0])
+    signatures, cells = reader.signatures[rows], reader.cells_at(rows)
+    fits = partial_distances(part, signatures, reader.params, cells)
+    closed = _closed_distances(part, signatures)
+    at = int(np.argmin(fused_scores(fits, closed, part.one_sided)))
+    first, fit = int(rows[at]), float(fits[at])
     near, near_dists = nearest(reader, reader.signatures[np.array([first])], k)
     others = [(int(r), float(d)) for r, d in zip(near[0], near_dists[0], strict=True) if r != first]
     ranked = [(first, 0.0), *others][:k]
@@ -88,10 +107,10 @@ def query_part(reader: IndexReader, part: Part, k: int = 20) -> tuple[list[Hit],
 
 
 def _nearest_by_cells(
-    reader: IndexReader, cells: tuple[tuple[np.ndarray, np.ndarray], ...]
-) -> tuple[int, float] | None:
-    """The row of the smallest partial distance by fine cells, and that distance; the first
-    such row on ties; None for an empty index. Reads every live row's cells, chunk by chunk
+    reader: IndexReader, cells: tuple[tuple[np.ndarray, np.ndarray], ...], k: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The k rows of the smallest partial distances by fine cells, nearest first (ties by row),
+    and those distances; none for an empty index. Reads every live row's cells, chunk by chunk
     (`cfsig.index.blocks`), one thread per core: in place from a memory map of each segment file
     where they are plain bytes, else through a buffer."""
     tasks: list[_CellTask] = []
@@ -105,7 +124,7 @@ def _nearest_by_cells(
     score = part_scorer(cells, FINE_SHARES, sum(v.signatures.shape[0] for v in reader.segments))
     rows = max((b.stop - b.start for _, b, _, m in tasks if m is None), default=0)
     slots = max((v.cells[0].shape[1] for v in reader.segments if v.cells), default=1)
-    found: list[tuple[float, int]] = []
+    found: list[tuple[np.ndarray, np.ndarray]] = []
 
     def work(task: _CellTask, buffers: _CellBuffers, lock: threading.Lock) -> None:
         view, block, same, mapped = task
@@ -124,19 +143,19 @@ def _nearest_by_cells(
         )
         start, stop = block.start, block.stop
         scores[view.dead[(view.dead >= start) & (view.dead < stop)] - start] = np.inf
-        at = int(np.argmin(scores))
-        if np.isfinite(scores[at]):
-            with lock:
-                found.append((float(scores[at]), view.start + start + at))
+        best = np.argsort(scores, kind="stable")[:k]
+        best = best[np.isfinite(scores[best])]
+        with lock:
+            found.append((scores[best], view.start + start + best))
 
     def make_buffers() -> _CellBuffers:
         return np.empty((rows, slots), np.uint16), np.empty((rows, slots), np.float32)
 
     parallel(tasks, work, make_buffers)
-    if not found:
-        return None
-    best, physical = min(found)
-    return int(reader.logical_rows(np.array([physical]))[0]), best
+    scores = np.concatenate([np.zeros(0), *(f[0] for f in found)])
+    physical = np.concatenate([np.zeros(0, np.int64), *(f[1] for f in found)])
+    best = np.lexsort((physical, scores))[:k]
+    return reader.logical_rows(physical[best]), scores[best]
 
 
 def partial_distances(
@@ -252,13 +271,83 @@ def expanded_distances(
     Returns
     -------
     distances : (N,) float64
-        -1 for the nearest whole by partial distance, the whole-shape distance to it for the
-        others.
+        -1 for the whole of least `fused_scores` among the `candidates`, the whole-shape
+        distance to it for the others.
     """
-    first = int(np.argmin(partial_distances(part, signatures, params, cells)))
+    fits = partial_distances(part, signatures, params, cells)
+    closed = _closed_distances(part, signatures)
+    rows = candidates(fits, closed)
+    picked = None if closed is None else closed[rows]
+    first = int(rows[np.argmin(fused_scores(fits[rows], picked, part.one_sided))])
     distances = l1_distances(signatures[first : first + 1], signatures)[0]
     distances[first] = -1.0
     return distances
+
+
+def candidates(partial: np.ndarray, closed: np.ndarray | None) -> np.ndarray:
+    """The rows `fused_scores` chooses among: the `CANDIDATES` nearest by each measure.
+
+    Parameters
+    ----------
+    partial : (N,) float
+        Partial distances of N wholes.
+    closed : (N,) float or None
+        Whole-shape distances of the closed part to them (`_closed_distances`).
+
+    Returns
+    -------
+    rows : (c,) int64
+        Ascending; c at most ``2 * CANDIDATES``. Ties go to the lower row, as `nearest` breaks
+        them.
+    """
+    rows = np.argsort(partial, kind="stable")[:CANDIDATES]
+    if closed is not None:
+        rows = np.union1d(rows, np.argsort(closed, kind="stable")[:CANDIDATES])
+    return np.sort(rows).astype(np.int64)
+
+
+def fused_scores(
+    partial: np.ndarray, closed: np.ndarray | None, one_sided: float = 0.0
+) -> np.ndarray:
+    """The score by which a part's candidate wholes are ranked: partial and closed distances.
+
+    Each distance is taken relative to its smallest over the candidates (which hold the
+    smallest over all wholes), so that the two add without a unit. The closed part's distance
+    weighs ``CLOSED_WEIGHT * exp(-d / CLOSED_SCALE)``, ``d`` its smallest: a part that closes into
+    the likeness of some whole (a shape with holes, most of a shape) is told by its whole-shape
+    distance, a half mostly by its partial distance. The partial distance weighs
+    ``1 - one_sided``: the curvature of a single view, a half-surface of every limb, is unlike
+    that of any part of its whole.
+
+    Parameters
+    ----------
+    partial : (c,) float
+        Partial distances of the candidates (`partial_distances`).
+    closed : (c,) float or None
+        Whole-shape distances of the closed part to them; None for a part without one.
+    one_sided : float
+        The part's `cfsig.descriptors.parts.one_sidedness`, in [0, 1].
+
+    Returns
+    -------
+    scores : (c,) float64
+        Smallest best; the partial distances themselves when ``closed`` is None.
+    """
+    partial = np.asarray(partial, np.float64)
+    if closed is None:
+        return partial
+    closed = np.asarray(closed, np.float64)
+    nearest = float(closed.min())
+    weight = CLOSED_WEIGHT * np.exp(-nearest / CLOSED_SCALE)
+    relative = partial / max(float(partial.min()), _FLOOR)
+    return (1 - one_sided) * relative + weight * closed / max(nearest, _FLOOR)
+
+
+def _closed_distances(part: Part, signatures: np.ndarray) -> np.ndarray | None:
+    """Whole-shape distances of the closed part to some wholes; None for a part without one."""
+    if part.closed is None:
+        return None
+    return l1_distances(part.closed[None], np.asarray(signatures, np.float32))[0]
 
 
 def part_scorer(
