@@ -44,6 +44,7 @@ import numpy as np
 from contourpy import contour_generator
 
 from cfsig.descriptors.base import Computed, Descriptor, Distance, L1Kernel
+from cfsig.files.elements import face_normals
 from cfsig.files.mesh import Mesh
 from cfsig.operators.conformal import ConformalFactor
 from cfsig.params import Layout, Params
@@ -498,8 +499,7 @@ def silhouettes(vertices: np.ndarray, faces: np.ndarray, fields: int = LIGHT_FIE
     projected = (projected - middle[:, None, :]) / half[:, None, None]  # in [-1, 1]
     pixels = (projected * [1, -1] + 1) * (GRID / 2)  # y up: row 0 at the top
     if closed_and_oriented(faces):
-        corners = vertices[faces]
-        normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        normals = face_normals(vertices, faces)
         directions = np.cross(frames[:, :, 0], frames[:, :, 1])
         view, face = np.nonzero(directions @ normals.T > 0)
     else:

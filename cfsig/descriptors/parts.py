@@ -25,6 +25,7 @@ from cfsig.descriptors import intrinsic
 from cfsig.descriptors.cells import cell_histogram
 from cfsig.descriptors.signature import compute_signature
 from cfsig.errors import MeshError, PartialError, SolverError
+from cfsig.files.elements import face_normals
 from cfsig.files.mesh import Mesh, read_mesh
 from cfsig.operators.conformal import Operators, operators
 from cfsig.operators.curvature import smoothed_curvature
@@ -116,8 +117,7 @@ def one_sidedness(mesh: Mesh) -> float:
     one_sided : float
         In [0, 1].
     """
-    corners = mesh.vertices[mesh.faces]
-    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normals = face_normals(mesh.vertices, mesh.faces)
     areas = np.linalg.norm(normals, axis=1)
     mean = normals.sum(axis=0)
     if not (areas.sum() > 0 and np.linalg.norm(mean) > 0):

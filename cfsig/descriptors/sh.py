@@ -43,6 +43,7 @@ from scipy.sparse import csr_matrix
 from scipy.special import sph_harm_y
 
 from cfsig.descriptors.base import Computed, Descriptor
+from cfsig.files.elements import face_normals
 from cfsig.files.mesh import Mesh
 from cfsig.operators.conformal import ConformalFactor
 from cfsig.params import Layout, Params
@@ -190,7 +191,7 @@ def surface_samples(
         The unit normal of each sample's face (zero for a degenerate face).
     """
     corners = vertices[faces]
-    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    cross = face_normals(vertices, faces)
     doubled = np.linalg.norm(cross, axis=1)
     areas = 0.5 * doubled
     total = areas.sum()

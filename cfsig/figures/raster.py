@@ -14,7 +14,7 @@ from types import ModuleType
 import numpy as np
 
 from cfsig.errors import MissingDependencyError
-from cfsig.files.elements import components, edge_graph, vertex_normals
+from cfsig.files.elements import components, edge_graph, face_normals, vertex_normals
 from cfsig.files.mesh import Mesh
 
 CMAP = "turbo"
@@ -234,7 +234,7 @@ def _visible_faces(mesh: Mesh, toward: np.ndarray) -> np.ndarray:
     ):
         return faces  # open, non-manifold or inconsistently oriented: the z-buffer sorts it out
     corner = mesh.vertices[faces]
-    normals = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
+    normals = face_normals(mesh.vertices, faces)
     _, labels = components(edge_graph(faces, n))
     component = labels[faces[:, 0]]
     volume = np.bincount(component, np.einsum("ij,ij->i", corner[:, 0], normals))

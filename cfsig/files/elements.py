@@ -238,6 +238,26 @@ def face_areas(lengths: np.ndarray) -> np.ndarray:
     return 0.25 * np.sqrt(np.maximum(prod, 0.0))
 
 
+def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Each face's normal scaled by twice its area: the cross product of two of its edges.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        Vertex positions.
+    faces : (m, 3) int64
+        Triangles.
+
+    Returns
+    -------
+    normals : (m, 3) float64
+        Along the face's orientation (its corners counter-clockwise seen from the tip); zero
+        for a degenerate face.
+    """
+    corners = vertices[faces]
+    return np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+
+
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted vertex normals.
 
@@ -253,10 +273,9 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     normals : (n, 3) float64
         Unit length (zero for isolated vertices), along the faces' orientation.
     """
-    corner = vertices[faces]
-    face_normals = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
+    scaled = face_normals(vertices, faces)
     index = faces.ravel()
     normals = np.column_stack(
-        [np.bincount(index, np.repeat(face_normals[:, d], 3), len(vertices)) for d in range(3)]
+        [np.bincount(index, np.repeat(scaled[:, d], 3), len(vertices)) for d in range(3)]
     )
     return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)

@@ -16,7 +16,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from cfsig.errors import MeshError, MissingDependencyError
-from cfsig.files.elements import Edges, mesh_edges, paired_half_edges
+from cfsig.files.elements import Edges, face_normals, mesh_edges, paired_half_edges
 from cfsig.files.folders import MESH_SUFFIXES
 
 # The Laplacian and the curvature take products of up to four lengths, which end float64 near
@@ -227,8 +227,7 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, weld: bool = True) -> Me
         faces = faces[np.sort(first)]
     if len(faces) == 0:
         raise MeshError("no triangles left after dropping degenerate faces")
-    corners = vertices[faces]
-    if not np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]).any():
+    if not face_normals(vertices, faces).any():
         raise MeshError("the triangles have no area: every one is degenerate")
     used = np.zeros(len(vertices), dtype=bool)
     used[faces.ravel()] = True

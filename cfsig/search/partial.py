@@ -337,10 +337,10 @@ def fused_scores(
     if closed is None:
         return partial
     closed = np.asarray(closed, np.float64)
-    nearest = float(closed.min())
-    weight = CLOSED_WEIGHT * np.exp(-nearest / CLOSED_SCALE)
+    least = float(closed.min())
+    weight = CLOSED_WEIGHT * np.exp(-least / CLOSED_SCALE)
     relative = partial / max(float(partial.min()), _FLOOR)
-    return (1 - one_sided) * relative + weight * closed / max(nearest, _FLOOR)
+    return (1 - one_sided) * relative + weight * closed / max(least, _FLOOR)
 
 
 def _closed_distances(part: Part, signatures: np.ndarray) -> np.ndarray | None:
