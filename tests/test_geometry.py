@@ -76,7 +76,7 @@ def test_areas_match_cross_product(sphere):
         np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1
     )
     assert np.allclose(elements.face_areas(elements.edge_lengths(v, f)), expected)
-    va = geometry.vertex_areas(expected, f, len(v))
+    va = elements.vertex_areas(expected, f, len(v))
     assert va.sum() == pytest.approx(expected.sum())
 
 
@@ -101,7 +101,7 @@ def test_components_and_target_curvature():
     assert count == 2
     k = _curvature(v, f)
     lengths = elements.edge_lengths(v, f)
-    va = geometry.vertex_areas(elements.face_areas(lengths), f, len(v))
+    va = elements.vertex_areas(elements.face_areas(lengths), f, len(v))
     target = geometry.target_curvature(k, va, labels)
     for c in range(2):
         assert target[labels == c].sum() == pytest.approx(k[labels == c].sum(), abs=1e-9)

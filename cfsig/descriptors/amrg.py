@@ -67,6 +67,7 @@ from cfsig.files.elements import (
     mesh_edges,
     paired_half_edges,
     signed_volumes,
+    vertex_areas,
     vertex_normals,
 )
 from cfsig.files.mesh import Mesh
@@ -152,7 +153,7 @@ def integral_geodesic(
     edges = np.concatenate([edges, bridges(vertices, edges)])
     length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
     graph = sp.coo_matrix((length, (edges[:, 0], edges[:, 1])), shape=(n, n)).tocsr()
-    area = np.bincount(faces.ravel(), np.repeat(areas / 3, 3), n)
+    area = vertex_areas(areas, faces, n)
     rows = np.empty((min(bases, n), n))
     nearest = np.full(n, np.inf)
     base = int(np.argmax(dijkstra(graph, directed=False, indices=0)))  # an end of the surface

@@ -238,6 +238,26 @@ def face_areas(lengths: np.ndarray) -> np.ndarray:
     return 0.25 * np.sqrt(np.maximum(prod, 0.0))
 
 
+def vertex_areas(areas: np.ndarray, faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """A third of the area of the faces around each vertex (the barycentric vertex area).
+
+    Parameters
+    ----------
+    areas : (m,) float64
+        Face areas.
+    faces : (m, 3) int64
+        Triangles.
+    n_vertices : int
+        Number of vertices n.
+
+    Returns
+    -------
+    vertex_area : (n,) float64
+        In squared length units; sums to the total area.
+    """
+    return np.bincount(faces.ravel(), weights=np.repeat(areas / 3, 3), minlength=n_vertices)
+
+
 def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Each face's normal scaled by twice its area: the cross product of two of its edges.
 

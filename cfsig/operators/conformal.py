@@ -106,7 +106,7 @@ def operators(mesh: Mesh, mollify: float = 1e-5) -> Operators:
     boundary = geometry.boundary_vertices(faces, laplacian)
     curvature = geometry.angle_defect(geometry.corner_angles(lengths), faces, boundary)
     count, labels = mesh_components(mesh, laplacian)
-    vertex_area = geometry.vertex_areas(areas, faces, n)
+    vertex_area = elements.vertex_areas(areas, faces, n)
     target = geometry.target_curvature(curvature, vertex_area, labels)
     return Operators(
         lengths, delta, boundary, curvature, areas, count, labels, vertex_area, target, laplacian

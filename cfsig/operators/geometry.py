@@ -192,26 +192,6 @@ def angle_defect(angles: np.ndarray, faces: np.ndarray, boundary: np.ndarray) ->
     return np.where(boundary, np.pi, 2 * np.pi) - total
 
 
-def vertex_areas(areas: np.ndarray, faces: np.ndarray, n_vertices: int) -> np.ndarray:
-    """A third of the area of the faces around each vertex (the barycentric vertex area).
-
-    Parameters
-    ----------
-    areas : (m,) float64
-        Face areas.
-    faces : (m, 3) int64
-        Triangles.
-    n_vertices : int
-        Number of vertices n.
-
-    Returns
-    -------
-    vertex_area : (n,) float64
-        In squared length units; sums to the total area.
-    """
-    return np.bincount(faces.ravel(), weights=np.repeat(areas / 3, 3), minlength=n_vertices)
-
-
 def target_curvature(
     curvature: np.ndarray, vertex_area: np.ndarray, labels: np.ndarray
 ) -> np.ndarray:

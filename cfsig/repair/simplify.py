@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from cfsig.errors import MeshError
-from cfsig.files.elements import edge_lengths, face_areas
+from cfsig.files.elements import edge_lengths, face_areas, vertex_areas
 from cfsig.files.mesh import Mesh, clean_mesh
 
 # The grid the coordinates are rounded to in the mesh's own frame, where the square root of
@@ -85,7 +85,7 @@ def canonical_frame(
     """
     areas = face_areas(edge_lengths(vertices, faces))
     # Each face's area shared among its corners: the surface's moments, lumped at the vertices.
-    weights = np.bincount(faces.ravel(), np.repeat(areas / 3, 3), len(vertices))
+    weights = vertex_areas(areas, faces, len(vertices))
     total = float(weights.sum())
     if not total > 0:
         return np.zeros(3), 1.0, np.eye(3)
