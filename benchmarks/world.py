@@ -21,7 +21,8 @@ per kind and amount, each from ``np.random.default_rng(i)``:
   surface, triangulated pixel by pixel where neighbouring depths agree, islands of less than 2%
   dropped, with Gaussian noise of N% of the bounding-box diagonal along the view;
 - ``noise-N``: the whole shape with Gaussian noise of N% of the diagonal on every vertex;
-- ``shot-R`` (copies of every mesh only): 0.1% of the vertices thrown R% of the diagonal.
+- ``shot-R`` (copies of every mesh only): 0.1% of the vertices thrown R% of the diagonal, R
+  each of `SHOTS`.
 
 Cuts and holes are re-tessellated (`retessellate`: split, slid along the surface and simplified
 to about 60% of the faces), so that no part shares a triangle with any indexed mesh; a scan is a
@@ -68,7 +69,7 @@ AMOUNTS = {
     "noise": (0.0025, 0.005, 0.01),
 }
 RANKINGS = {"curvature columns": cfsig.Params(), "fine cells": cfsig.Params(partial_cells=True)}
-SHOT = 0.1  # how far, over the diagonal, shot noise throws 0.1% of the vertices
+SHOTS = (0.02, 0.1, 0.5)  # how far, over the diagonal, shot noise throws 0.1% of the vertices
 MEASURES = ("NN", "FT", "mAP")
 SCAN_PIXELS = 128
 # Depths a 2 x 2 block of a scan's pixels may span: a surface up to about 75 degrees from
@@ -351,7 +352,8 @@ def collection_rows(
             link(everything, tmp / "clean")
             clean, _ = cfsig.compute_collection(tmp / "clean", cfsig.Params(), jobs=jobs)
             clean_ft = cfsig.evaluate_collections({"clean": clean})["clean"].report.measures["FT"]
-            for kind, amount in [("noise", a) for a in amounts["noise"]] + [("shot", SHOT)]:
+            noisy_kinds = [("noise", a) for a in amounts["noise"]] + [("shot", a) for a in SHOTS]
+            for kind, amount in noisy_kinds:
                 found = noise_duplicates(clean, everything, kind, amount, tmp, jobs)
                 copies.append([name, kind_name(kind, amount), *found, f"{clean_ft:.3f}"])
     return out, duplicate, copies

@@ -4,10 +4,13 @@ The conformal factor is defined on a closed manifold (paper section 2); on a mod
 separate parts it is solved per part, and each part gets an unrelated distribution (the paper's
 "most important drawback", section 4). `repair_mesh` runs between reading (`cfsig.files.mesh`, which
 always welds, drops duplicates and degenerate faces and splits non-manifold vertices) and the
-numerics, and chooses one of three routes (docs/method.md, "The repair stage"):
+numerics. Under every mode but ``off`` it first moves spikes, single vertices thrown off the
+surface, back among their neighbours (`cfsig.repair.spikes`). It then chooses one of three
+routes (docs/method.md, "The repair stage"):
 
-- ``clean``: the mesh is one closed manifold, oriented outward; it passes unchanged, bit for
-  bit. One closed manifold with faces reversed only has them turned (route ``repaired``).
+- ``clean``: the mesh is one closed manifold, oriented outward, without spikes; it passes
+  unchanged, bit for bit. One closed manifold with faces reversed or spikes only has them
+  turned or moved (route ``repaired``).
 - ``repaired``: local repairs make it closed manifold parts, for any amount of damage: fins,
   dangling sheets and inner walls on non-manifold edges are dropped, and so are open parts
   inside closed ones; T-junctions split, parts whose boundaries nearly meet stitched, small
@@ -49,6 +52,7 @@ from cfsig.repair.local import (
     weld_copies,
 )
 from cfsig.repair.proxy import proxy_mesh
+from cfsig.repair.spikes import flatten_spikes
 
 # Boundary vertices of different parts closer than this fraction of the bounding-box diagonal
 # are stitched together.
@@ -105,6 +109,17 @@ def repair_mesh(mesh: Mesh, mode: str = "auto", limits: Limits | None = None) ->
     if mode not in REPAIR_MODES:
         raise ValueError(f"unknown repair mode {mode!r}; choose from {', '.join(REPAIR_MODES)}")
     edges, n_parts, labels, closed = _surface(mesh)
+    if mode != "off":
+        vertices, spikes = flatten_spikes(mesh.vertices, edges)
+        if spikes:
+            moved = f"moved {spikes} spikes back among their neighbours"
+            mesh = replace(
+                mesh,
+                vertices=vertices,
+                repairs=(*mesh.repairs, moved),
+                edges=edges,
+                route="repaired",
+            )
     if n_parts == 1 and closed:
         if _oriented_outward(mesh, edges):
             return replace(mesh, parts=labels)
