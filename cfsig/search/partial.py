@@ -98,7 +98,7 @@ def query_part(reader: IndexReader, part: Part, k: int = 20) -> tuple[list[Hit],
     closed = _closed_distances(part, signatures)
     at = int(np.argmin(fused_scores(fits, closed, part.one_sided)))
     first, fit = int(rows[at]), float(fits[at])
-    near, near_dists = nearest(reader, reader.signatures[np.array([first])], k)
+    near, near_dists = nearest(reader, signatures[at : at + 1], k)
     others = [(int(r), float(d)) for r, d in zip(near[0], near_dists[0], strict=True) if r != first]
     ranked = [(first, 0.0), *others][:k]
     entries = reader.entries(np.array([r for r, _ in ranked]))
@@ -300,10 +300,10 @@ def candidates(partial: np.ndarray, closed: np.ndarray | None) -> np.ndarray:
         Ascending; c at most ``2 * CANDIDATES``. Ties go to the lower row, as `nearest` breaks
         them.
     """
-    rows = np.argsort(partial, kind="stable")[:CANDIDATES]
+    nearest_first = [np.argsort(partial, kind="stable")[:CANDIDATES]]
     if closed is not None:
-        rows = np.union1d(rows, np.argsort(closed, kind="stable")[:CANDIDATES])
-    return np.sort(rows).astype(np.int64)
+        nearest_first.append(np.argsort(closed, kind="stable")[:CANDIDATES])
+    return np.unique(np.concatenate(nearest_first)).astype(np.int64)
 
 
 def fused_scores(
