@@ -34,7 +34,9 @@ bench-perf: $(BIN)/python
 	$(BIN)/pip install -q -e '.[cholmod,fast]'
 	$(BIN)/python benchmarks/per_mesh.py --data $(DATA)/shrec07
 	$(BIN)/python benchmarks/index_scale.py --dir $(SCRATCH) --sizes 1000000
-	$(BIN)/python benchmarks/partial_speed.py --index-dir $(SCRATCH) --rows 1000000
+	$(BIN)/cfsig index $(DATA)/shrec07 -o $(SCRATCH)/shrec07-cells --partial-cells
+	$(BIN)/python benchmarks/partial_speed.py --index-dir $(SCRATCH) --rows 1000000 \
+		--real $(SCRATCH)/shrec07-cells
 
 clean:
 	rm -rf $(VENV) cfsig-demo .pytest_cache .ruff_cache .mypy_cache .hypothesis

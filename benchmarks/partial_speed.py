@@ -1,16 +1,18 @@
 """What a user waits for at the shell: ``cfsig query INDEX PART.off --partial`` over many rows.
 
-    python benchmarks/partial_speed.py --index-dir DIR --rows 1000000 [--repeat 5]
+    python benchmarks/partial_speed.py --index-dir DIR --rows 1000000 [--real INDEX] [--repeat 5]
 
 Builds ``DIR/rows-N``, an index of N rows with fine curvature cells
-(``Params(partial_cells=True)``), unless it is already there: the demo collection
-(`cfsig.files.demo.make_demo_collection`, one mesh a class: 6) is computed once; each row
-holds the fine cells of one of them and a vector mixed from two of them plus noise (`build`),
-a commit every 100,000 rows.
+(``Params(partial_cells=True)``), unless it is already there, from some wholes: those of the
+index ``--real`` (``cfsig index DATA/shrec07 -o INDEX --partial-cells``), whose cells are as
+many as real meshes have (about 700 a row on SHREC 2007); without it, the demo collection
+(`cfsig.files.demo.make_demo_collection`, one mesh a class: 6, about 240 cells a row), computed
+once. Each row holds the fine cells of one whole and a vector mixed from two of them plus
+noise (`build`), a commit every 100,000 rows.
 
 Then times the whole command ``python -m cfsig query DIR/rows-N PART.off --partial`` in a fresh
 interpreter (its start, imports, the part's measurement and the search of every row included),
-PART half of one demo mesh cut by a plane and re-tessellated (`world.query_mesh`),
+PART half of the first whole cut by a plane and re-tessellated (`world.query_mesh`),
 ``--repeat`` times after one warm-up, and prints the median and the range in seconds.
 """
 
@@ -31,21 +33,42 @@ import cfsig
 from cfsig.files.demo import make_demo_collection, write_off
 
 COMMIT_ROWS = 100_000
+PARAMS = cfsig.Params(partial_cells=True)
 NOISE = 0.05  # of each coordinate's spread over the demo meshes
 
 
-def build(index: Path, rows: int, demo: list[Path]) -> float:
+def wholes(real: Path | None, folder: Path) -> tuple[list[Path], list[cfsig.Signature]]:
+    """The wholes the rows are made from: their files and signatures with fine cells, those of
+    the index ``real`` or else of the demo collection, made in ``folder``."""
+    if real is None:
+        demo = make_demo_collection(folder / "demo", per_class=1)
+        return demo, [cfsig.signature_file(path, PARAMS) for path in demo]
+    with cfsig.IndexReader(real) as reader:
+        if reader.params != PARAMS:
+            sys.exit(f"{real}: not an index of the default parameters with --partial-cells")
+        vectors, (cells, units) = reader.signatures[:], reader.cells()
+        paths = [Path(p) for p in reader.column("paths")]
+    stored = cfsig.Signature(
+        vector=vectors[0], phi=None, n_vertices=0, n_faces=0, n_components=1,
+        curvature_error=0.0, repairs=(), route="clean", seconds=0.0,
+    )  # fmt: skip
+    made = [
+        replace(stored, vector=v.astype(np.float64), cells=(c, u))
+        for v, c, u in zip(vectors, cells, units, strict=True)
+    ]
+    return paths, made
+
+
+def build(index: Path, rows: int, signatures: list[cfsig.Signature]) -> float:
     """Write ``rows`` rows with fine cells; the seconds taken. Each row holds the cells of one
-    demo mesh and, as its vector, a random mix of two demo meshes' vectors plus noise of
-    `NOISE` times each coordinate's spread over them: rows that look like real ones, not
-    copies, which would tie at distance 0 and defeat the whole-shape search's pruning."""
+    whole and, as its vector, a random mix of two wholes' vectors plus noise of `NOISE` times
+    each coordinate's spread over them: rows that look like real ones, not copies, which
+    would tie at distance 0 and defeat the whole-shape search's pruning."""
     start = time.perf_counter()
-    params = cfsig.Params(partial_cells=True)
-    signatures = [cfsig.signature_file(path, params) for path in demo]
     vectors = np.array([s.vector for s in signatures])
     spread = vectors.std(axis=0)
     rng = np.random.default_rng(0)
-    with cfsig.IndexWriter(index, params, cfsig.layout(params)) as writer:
+    with cfsig.IndexWriter(index, PARAMS, cfsig.layout(PARAMS)) as writer:
         for first in range(0, rows, COMMIT_ROWS):
             count = min(COMMIT_ROWS, rows - first)
             a, b = rng.integers(0, len(vectors), (2, count))
@@ -66,16 +89,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--index-dir", type=Path, required=True, help="folder of the index")
     parser.add_argument("--rows", type=int, default=1_000_000, help="rows of the index")
+    parser.add_argument("--real", type=Path, help="an index with fine cells to make rows from")
     parser.add_argument("--repeat", type=int, default=5, help="timed commands")
     args = parser.parse_args()
     index = args.index_dir / f"rows-{args.rows}"
-    demo = make_demo_collection(args.index_dir / "demo", per_class=1)
+    paths, signatures = wholes(args.real, args.index_dir)
     if (index / "manifest.h5").exists():
         with cfsig.IndexReader(index) as reader:
             print(f"reusing {index}: {len(reader):,} rows")
     else:
-        print(f"built {index}: {args.rows:,} rows in {build(index, args.rows, demo):.1f} s")
-    part = query_mesh(cfsig.read_mesh(demo[0]), "cut", 0.5, np.random.default_rng(0))
+        seconds = build(index, args.rows, signatures)
+        print(f"built {index}: {args.rows:,} rows in {seconds:.1f} s")
+    part = query_mesh(cfsig.read_mesh(paths[0]), "cut", 0.5, np.random.default_rng(0))
     path = args.index_dir / "part.off"
     write_off(path, part.vertices, part.faces)
     command = [sys.executable, "-m", "cfsig", "query", str(index), str(path), "--partial"]

@@ -223,7 +223,7 @@ def compute(
             save.mkdir(parents=True, exist_ok=True)
             arrays: dict[str, Any] = {"signature": sig.vector, "phi": sig.phi}
             if sig.cells is not None:
-                arrays["cells"], arrays["cell_fractions"] = sig.cells
+                arrays["cells"], arrays["cell_units"] = sig.cells
             np.savez(save / f"{path.stem}.npz", params=params.to_json(), **arrays)
         if not as_json:
             click.echo(

@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 
 from cfsig.descriptors import intrinsic, layout
-from cfsig.descriptors.cells import SLOTS, cell_histogram, packed_cells, window_cells
+from cfsig.descriptors.cells import (
+    SLOTS,
+    UNIT,
+    area_units,
+    cell_histogram,
+    packed_cells,
+    window_cells,
+)
 from cfsig.descriptors.intrinsic import curvature_histograms
 from cfsig.descriptors.parts import FINE_SHARES, Part, measure_part
 from cfsig.descriptors.signature import compute_signature
@@ -20,7 +27,7 @@ from cfsig.files.mesh import clean_mesh
 from cfsig.index.blocks import plan_blocks
 from cfsig.index.store import Entry, IndexReader, check_index
 from cfsig.params import Params
-from cfsig.search.cells import UNIT, area_units, cell_scores
+from cfsig.search.cells import cell_scores
 from cfsig.search.partial import (
     FAST_MIN_ROWS,
     part_scorer,
@@ -59,14 +66,16 @@ def test_all_scales_jointly_one_cell_per_vertex():
 def test_packed_cells_keep_the_largest_in_fixed_width():
     values, areas = _values(2000), np.random.default_rng(2).random(2000)
     cells, fractions = cell_histogram(values, areas, 33, 4)
-    packed, packed_fractions = packed_cells(values, areas, 33, 4, slots=len(cells) // 2)
-    assert packed.dtype == np.uint16 and packed_fractions.dtype == np.float32
+    packed, packed_units = packed_cells(values, areas, 33, 4, slots=len(cells) // 2)
+    assert packed.dtype == np.uint16 and packed_units.dtype == np.uint16
     assert np.all(np.diff(packed.astype(int)) > 0)
     kept = np.isin(cells, packed)
     assert fractions[kept].min() >= fractions[~kept].max()
-    wide, wide_fractions = packed_cells(values, areas, 33, 4, slots=len(cells) + 5)
-    assert np.array_equal(wide[: len(cells)], cells) and not wide_fractions[len(cells) :].any()
-    assert wide_fractions.sum() == pytest.approx(1.0, rel=1e-6)
+    wide, wide_units = packed_cells(values, areas, 33, 4, slots=len(cells) + 5)
+    assert np.array_equal(wide[: len(cells)], cells) and not wide_units[len(cells) :].any()
+    # Each share rounded to the nearest unit (scaled in float32): off by half a unit at most.
+    assert np.abs(wide_units[: len(cells)] - fractions * UNIT).max() <= 0.51
+    assert abs(int(wide_units.sum(dtype=np.int64)) - UNIT) <= len(cells) / 2
 
 
 def _dense_scores(part, shares, cells, fractions, size):
@@ -96,14 +105,15 @@ def test_cell_scores_are_the_partial_distance():
     part = [_histogram(rng, 10, size) for _ in shares]
     wholes = [_histogram(rng, 25, size) for _ in range(6)]
     cells = np.zeros((6, 32), np.uint16)
-    fractions = np.zeros((6, 32), np.float32)
+    fractions = np.zeros((6, 32))
     for row, (c, w) in enumerate(wholes):
         cells[row, : len(c)], fractions[row, : len(c)] = c, w
-    got = cell_scores(part, shares, cells, fractions)
-    # Fractions rounded to units of 1/UNIT: each of the 35 cells moves a sum by half a unit at most.
+    got = cell_scores(part, shares, cells, area_units(fractions))
+    # Shares rounded to units of 1/UNIT: each of the 35 cells moves a sum by half a unit at most.
     dense = _dense_scores(part, shares, cells, fractions, size)
     assert np.allclose(got, dense, atol=35 / UNIT / min(shares)) and np.ptp(dense) > 0.1
-    same = cell_scores([(c, w) for c, w in [wholes[2]]], (1.0,), cells[2:3], fractions[2:3])
+    units = area_units(fractions[2:3])
+    same = cell_scores([(c, w) for c, w in [wholes[2]]], (1.0,), cells[2:3], units)
     assert same[0] == 0.0  # a whole is its own part at share 1
 
 
@@ -119,7 +129,7 @@ def test_compiled_scores_are_numpys(slots, shares):
     rng = np.random.default_rng(5)
     part = [_histogram(rng, 200) for _ in shares]
     cells = np.zeros((300, slots), np.uint16)
-    fractions = np.zeros((300, slots), np.float32)
+    fractions = np.zeros((300, slots))
     for row in range(len(cells)):
         c, w = _histogram(rng, int(rng.integers(1, slots)))
         if row % 3 == 0:  # some of them the part's own cells, so that the scores spread
@@ -129,16 +139,17 @@ def test_compiled_scores_are_numpys(slots, shares):
         if row % 7 == 1:  # 32 slots of no area, between held ones
             w[16:48] = 0
         cells[row, : len(c)], fractions[row, : len(c)] = c, w
+    units = area_units(fractions)
     fast = part_scorer(part, shares, FAST_MIN_ROWS)
     assert not isinstance(fast, functools.partial)  # compiled, not cell_scores
-    expected = cell_scores(part, shares, cells, fractions)
-    got = fast(cells, fractions)
+    expected = cell_scores(part, shares, cells, units)
+    got = fast(cells, units)
     assert got.dtype == np.float64 and got.shape == (300,)
     assert np.array_equal(got, expected)  # the same sums in integers, the same float64 steps
     assert np.ptp(got) > 1  # spread: the part's own cells and unrelated ones
-    assert np.array_equal(fast(cells[:0], fractions[:0]), np.zeros(0))
-    empty = fast(cells[:2, :0], fractions[:2, :0])  # no slots: all of the part is unexplained
-    assert np.array_equal(empty, cell_scores(part, shares, cells[:2, :0], fractions[:2, :0]))
+    assert np.array_equal(fast(cells[:0], units[:0]), np.zeros(0))
+    empty = fast(cells[:2, :0], units[:2, :0])  # no slots: all of the part is unexplained
+    assert np.array_equal(empty, cell_scores(part, shares, cells[:2, :0], units[:2, :0]))
     assert empty == pytest.approx([2.0, 2.0], abs=1e-2)
 
 
@@ -151,9 +162,9 @@ def test_numpy_scores_where_the_compiled_kernel_does_not_serve(monkeypatch, case
         monkeypatch.setitem(sys.modules, "cfsig.search.cells_compiled", None)  # import fails
         monkeypatch.delattr("cfsig.search.cells_compiled", raising=False)
     scorer = part_scorer(part, shares, rows)
-    cells, fractions = np.array([[1, 2]], np.uint16), np.array([[0.5, 0.5]], np.float32)
+    cells, units = np.array([[1, 2]], np.uint16), area_units(np.array([[0.5, 0.5]]))
     assert isinstance(scorer, functools.partial) and scorer.func is cell_scores
-    assert scorer(cells, fractions)[0] == 0.0
+    assert scorer(cells, units)[0] == 0.0
 
 
 def test_partial_cells_keep_the_vector_and_add_the_cells():
@@ -161,27 +172,28 @@ def test_partial_cells_keep_the_vector_and_add_the_cells():
     sig = compute_signature(mesh, V10)
     assert np.array_equal(sig.vector, compute_signature(mesh, Params()).vector)
     assert compute_signature(mesh, Params()).cells is None
-    cells, fractions = sig.cells
-    assert cells.shape == fractions.shape == (SLOTS,) == (layout(V10).cells,)
-    assert fractions.sum() == pytest.approx(1.0, rel=1e-5) and (fractions > 0).sum() > 1
-    # The whole measured as a part at share 1 finds the same cells.
+    cells, units = sig.cells
+    assert cells.shape == units.shape == (SLOTS,) == (layout(V10).cells,)
+    used = units > 0
+    assert abs(int(units.sum(dtype=np.int64)) - UNIT) <= used.sum() / 2 and used.sum() > 1
+    # The whole measured as a part at share 1 finds the same cells, the same shares.
     ((part_cells, part_fractions), *_) = measure_part(mesh, V10).cells
     assert FINE_SHARES[0] == 1.0 and len(measure_part(mesh, V10).cells) == len(FINE_SHARES)
-    used = fractions > 0
     assert np.array_equal(part_cells, cells[used])
-    assert np.allclose(part_fractions, fractions[used], rtol=1e-5)
+    assert np.array_equal(area_units(part_fractions), units[used])
 
 
 def _signature(seed):
     """A signature with fine cells, of random values with random cells."""
     rng = np.random.default_rng(seed)
     cells = np.zeros(SLOTS, np.uint16)
-    fractions = np.zeros(SLOTS, np.float32)
+    fractions = np.zeros(SLOTS)
     count = int(rng.integers(1, 50))
     cells[:count] = np.sort(rng.choice(30000, count, replace=False))
     fractions[:count] = rng.random(count)
     vector = random_signature(seed, layout(V10).length).vector
-    return replace(random_signature(seed), vector=vector, cells=(cells, fractions))
+    cells_and_units = (cells, area_units(fractions / fractions.sum()))
+    return replace(random_signature(seed), vector=vector, cells=cells_and_units)
 
 
 def test_an_index_keeps_the_cells_through_merges(tmp_path):
@@ -203,12 +215,12 @@ def test_an_index_keeps_the_cells_through_merges(tmp_path):
                 w.compact()
                 assert len(w.segments) == 1
         with IndexReader(index) as r:
-            cells, fractions = r.cells()
+            cells, units = r.cells()
             names = list(r.column("names"))
         assert sorted(names) == sorted(want)
         for row, name in enumerate(names):
             assert np.array_equal(cells[row], want[name][0])
-            assert np.array_equal(fractions[row], want[name][1])
+            assert np.array_equal(units[row], want[name][1])
     assert check_index(index) == []
 
 
@@ -219,11 +231,11 @@ def test_damaged_or_missing_cells_are_named(tmp_path):
             w.add(Entry(f"c/{i}.off", "c", f"/c/{i}.off"), _signature(i))
     (segment,) = index.glob("seg-*.h5")
     with h5py.File(segment, "r") as f:
-        offset = f["cell_fractions"].id.get_chunk_info(0).byte_offset + 4
+        offset = f["cell_units"].id.get_chunk_info(0).byte_offset + 4
     data = bytearray(segment.read_bytes())
     data[offset] ^= 0xFF
     segment.write_bytes(bytes(data))
-    assert any("column cell_fractions: checksum mismatch" in p for p in check_index(index))
+    assert any("column cell_units: checksum mismatch" in p for p in check_index(index))
     with h5py.File(segment, "a") as f:
         del f["cells"]
     with pytest.raises(IndexFileError, match="fine curvature cells are missing"):
@@ -281,15 +293,15 @@ def test_partial_search_reads_compressed_cells_through_h5py(tmp_path, kernel):
             w.add(Entry(f"c/{i}.off", "c", f"/d/c/{i}.off"), _signature(i))
     (segment,) = index.glob("seg-*.h5")
     with h5py.File(segment, "a") as f:  # as another writer of HDF5 might store them
-        for name in ("cells", "cell_fractions"):
+        for name in ("cells", "cell_units"):
             data = f[name][:]
             del f[name]
             f.create_dataset(name, data=data, chunks=(5, data.shape[1]), compression="gzip")
     with IndexReader(index) as reader:
         assert all(b.offset is None for b in plan_blocks(reader.segments[0].cells[0], 4))
-        stored, fractions = reader.cells()
+        stored, units = reader.cells()
         for row in (3, 7):
-            _search_finds_the_nearest(reader, stored[row][fractions[row] > 0].astype(np.int64)[::2])
+            _search_finds_the_nearest(reader, stored[row][units[row] > 0].astype(np.int64)[::2])
 
 
 def test_partial_search_without_memory_maps_reads_the_blocks(tmp_path, monkeypatch):
@@ -303,9 +315,9 @@ def test_partial_search_without_memory_maps_reads_the_blocks(tmp_path, monkeypat
 
     monkeypatch.setattr("cfsig.index.blocks.mmap.mmap", refuse)
     with IndexReader(index) as reader:
-        stored, fractions = reader.cells()
+        stored, units = reader.cells()
         for row in (2, 5):
-            _search_finds_the_nearest(reader, stored[row][fractions[row] > 0].astype(np.int64)[::3])
+            _search_finds_the_nearest(reader, stored[row][units[row] > 0].astype(np.int64)[::3])
 
 
 def test_cells_cut_short_after_opening_are_a_clear_error(tmp_path):
@@ -315,9 +327,9 @@ def test_cells_cut_short_after_opening_are_a_clear_error(tmp_path):
             w.add(Entry(f"c/{i}.off", "c", f"/d/c/{i}.off"), _signature(i))
     with IndexReader(index) as reader:
         (segment,) = index.glob("seg-*.h5")
-        fractions = reader.segments[0].cells[1]
-        (block,) = plan_blocks(fractions, 4096)
+        units = reader.segments[0].cells[1]
+        (block,) = plan_blocks(units, 4096)
         os.truncate(segment, block.offset + 10)
         part = Part(cells=((np.array([1, 2]), np.array([0.5, 0.5])),) * len(FINE_SHARES))
-        with pytest.raises(IndexFileError, match="ends inside /cell_fractions"):
+        with pytest.raises(IndexFileError, match="ends inside /cell_units"):
             query_part(reader, part, 3)

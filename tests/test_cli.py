@@ -75,7 +75,7 @@ def test_index_stores_names_labels_and_metadata(built_index):
     assert f["signatures"].shape[0] == 18
     assert np.isfinite(f["signatures"]).all()
     assert (f["n_vertices"] > 1000).all()
-    assert f["attrs"]["format_version"] == 5
+    assert f["attrs"]["format_version"] == 6
 
 
 def test_index_again_adds_only_new_and_changed(collection, tmp_path):

@@ -56,7 +56,7 @@ def test_golden_vectors(name):
     np.testing.assert_allclose(sig.vector, golden[f"{name}_default"], rtol=0, atol=1e-10)
     assert sig.cells is not None
     assert np.array_equal(sig.cells[0], golden[f"{name}_cells"])
-    assert np.array_equal(sig.cells[1], golden[f"{name}_cell_fractions"])
+    assert np.array_equal(sig.cells[1], golden[f"{name}_cell_units"])
     assert np.array_equal(compute_signature(mesh, DEFAULT).vector, sig.vector)
 
 

@@ -9,7 +9,14 @@ import cfsig.search.l1
 import cfsig.search.nearest
 from cfsig.descriptors.signature import Signature
 from cfsig.errors import IndexFileError
-from cfsig.index.blocks import plan_blocks, read_block, read_columns
+from cfsig.index.blocks import (
+    load_block,
+    map_file,
+    plan_blocks,
+    read_block,
+    read_columns,
+    read_rows,
+)
 from cfsig.index.store import Entry, IndexReader
 from cfsig.search.l1 import choose_kernel, fast_kernel, l1_numpy
 from cfsig.search.nearest import nearest, query
@@ -159,6 +166,32 @@ def test_every_layout_gives_the_same_result(tmp_path, monkeypatch, layout):
     assert np.array_equal(np.concatenate(columns), hists[:, 30:90])
     assert np.array_equal(rows, _brute_nearest(hists[:2], hists, 6)[0])
     assert np.array_equal(some, _brute_nearest(hists[:2, 30:90], hists[:, 30:90], 6)[0])
+
+
+@pytest.mark.parametrize("layout", ["chunked", "contiguous", "compressed"])
+def test_rows_read_alike_from_the_file_from_a_memory_map_and_through_hdf5(tmp_path, layout):
+    path = tmp_path / "rows.h5"
+    data = _histograms(700, 13)
+    options = {
+        "chunked": {"chunks": (300, 200)},
+        "contiguous": {},
+        "compressed": {"chunks": (300, 200), "compression": "gzip"},
+    }[layout]
+    with h5py.File(path, "w") as f:
+        f.create_dataset("s", data=data, **options)
+    rng = np.random.default_rng(14)
+    # Sparse, runs and a block wanted whole: the memory map serves blocks of 64 rows or more.
+    wanted = np.unique(np.r_[rng.choice(300, 5), 300 + rng.choice(300, 150), 600:700])
+    with h5py.File(path, "r") as f:
+        blocks = plan_blocks(f["s"], 300)
+        mapped = map_file(f["s"])
+        assert (layout == "compressed") == (blocks[0].offset is None) and mapped is not None
+        buffer = np.empty((max(len(wanted), 300), 200), np.float32)
+        read = read_rows(f["s"], blocks, wanted, buffer).copy()
+        viewed = read_rows(f["s"], blocks, wanted, buffer, mapped).copy()
+        loaded = [load_block(f["s"], b, buffer, mapped).copy() for b in blocks]
+    assert np.array_equal(read, data[wanted]) and np.array_equal(viewed, data[wanted])
+    assert np.array_equal(np.concatenate(loaded), data)
 
 
 def test_small_compressed_chunks_are_read_many_at_a_time(tmp_path):

@@ -236,8 +236,16 @@ V10 = {"descriptor": "cfhks", "version": 10, "bins": 200, "repair": "auto"}
         (lambda path: _format_2(path, dict(V10, descriptor="cf", version=1)), "cf version 1"),
         (lambda path: _format_2(path, json.loads(Params().to_json()), 3), "in index format 3"),
         (lambda path: _format_2(path, json.loads(Params().to_json()), 4), "in index format 4"),
+        (lambda path: _format_2(path, json.loads(Params().to_json()), 5), "in index format 5"),
     ],
-    ids=["format 1", "format 2, a removed version", "format 2, cf", "format 3", "format 4"],
+    ids=[
+        "format 1",
+        "format 2, a removed version",
+        "format 2, cf",
+        "format 3",
+        "format 4",
+        "format 5",
+    ],
 )
 def test_older_indexes_are_refused_with_the_command_that_rebuilds_them(tmp_path, make, named):
     old = tmp_path / "old"

@@ -13,7 +13,7 @@ from cfsig.operators.conformal import ConformalFactor, Operators
 from cfsig.params import Layout, Params
 
 # A mesh's fine curvature cells, kept beside its vector for partial queries
-# (`cfsig.descriptors.cells.packed_cells`): (slots,) uint16 cells and (slots,) float32 fractions.
+# (`cfsig.descriptors.cells.packed_cells`): (slots,) uint16 cells and their (slots,) uint16 shares.
 Cells = tuple[np.ndarray, np.ndarray]
 
 

@@ -9,8 +9,8 @@ cells for k scales (33 x 9^3 = 24,057 for the intrinsic descriptor's four). A wh
 hundred of
 them, close to one per vertex of its simplified copy, so a part, a subset of its whole's
 surface, finds its own whole by them far more often than by the coarse channel (docs/method.md).
-They are kept sparse: the cells a surface occupies and
-the share of its area in each, at most `SLOTS` of them per row of the index.
+They are kept sparse: the cells a surface occupies and the share of its area in each, in
+integer units of ``1 / UNIT`` (`area_units`), at most `SLOTS` of them per row of the index.
 """
 
 from __future__ import annotations
@@ -20,6 +20,27 @@ import numpy as np
 CURVATURE_RANGE = 6.0  # bins span asinh(value / CURVATURE_UNIT) in [-6, 6]: +-2000 in value
 CURVATURE_UNIT = 10.0  # about the sphere's 4 pi: the histogram is linear below, logarithmic above
 SLOTS = 1024  # cells kept per whole: 709 a whole is the median on SHREC 2007, 1,070 the most
+# Shares of an area are kept and summed as integers in units of 1/UNIT, 16 bits each: a row's
+# SLOTS shares, each rounded by at most half a unit, still sum below 2^16.
+UNIT = 65_000
+
+
+def area_units(fractions: np.ndarray) -> np.ndarray:
+    """Shares of a surface's area in integer units of ``1 / UNIT``.
+
+    Parameters
+    ----------
+    fractions : array of float
+        Shares of an area, in [0, 1].
+
+    Returns
+    -------
+    units : uint16 array, the shape of ``fractions``
+        ``fractions`` in float32 times `UNIT`, clipped to [0, UNIT] and rounded to the nearest
+        integer (ties to even).
+    """
+    scaled = np.asarray(fractions, np.float32) * np.float32(UNIT)
+    return np.rint(np.clip(scaled, 0, UNIT)).astype(np.uint16)
 
 
 def curvature_bins(values: np.ndarray, bins: int) -> np.ndarray:
@@ -126,13 +147,14 @@ def packed_cells(
     -------
     cells : (slots,) uint16
         The cells kept, ascending, then zeros.
-    fractions : (slots,) float32
-        Their shares of the area, then zeros (an empty slot holds nothing).
+    units : (slots,) uint16
+        Their shares of the area in units of ``1 / UNIT`` (`area_units`), then zeros (an empty
+        slot holds nothing).
     """
     cells, fractions = cell_histogram(values, areas, bins, band)
     if len(cells) > slots:
         kept = np.sort(np.argsort(-fractions, kind="stable")[:slots])
         cells, fractions = cells[kept], fractions[kept]
-    out_cells, out_fractions = np.zeros(slots, np.uint16), np.zeros(slots, np.float32)
-    out_cells[: len(cells)], out_fractions[: len(cells)] = cells, fractions
-    return out_cells, out_fractions
+    out_cells, out_units = np.zeros(slots, np.uint16), np.zeros(slots, np.uint16)
+    out_cells[: len(cells)], out_units[: len(cells)] = cells, area_units(fractions)
+    return out_cells, out_units

@@ -150,7 +150,7 @@ def channels(ops: Operators, spectrum: Spectrum, cells: bool) -> dict[str, np.nd
         ``"spectrum"``: (EIGENPAIRS,) ``log(lambda_i * area)``; a surface with fewer nonzero
         eigenvalues repeats its largest. ``"heat"``: (len(TIMES), QUANTILES) quantiles of
         ``log(area * h_t)``. ``"curvature"``: `curvature_histograms`. With ``cells``,
-        ``"cells"`` and ``"cell_fractions"``: `cfsig.descriptors.cells.packed_cells`.
+        ``"cells"`` and ``"cell_units"``: `cfsig.descriptors.cells.packed_cells`.
 
     Raises
     ------
@@ -171,7 +171,7 @@ def channels(ops: Operators, spectrum: Spectrum, cells: bool) -> dict[str, np.nd
         "curvature": curvature_histograms(curvature, weights),
     }
     if cells:
-        found["cells"], found["cell_fractions"] = packed_cells(
+        found["cells"], found["cell_units"] = packed_cells(
             curvature, ops.vertex_area, FINE_BINS, FINE_BAND
         )
     return found
@@ -249,7 +249,7 @@ def _on_copy(mesh: Mesh, cells: bool, solver: str) -> tuple[np.ndarray, Cells | 
 
 def _vector(found: dict[str, np.ndarray]) -> tuple[np.ndarray, Cells | None]:
     """The weighed vector of some channels and their fine cells, if they were computed."""
-    cells = (found["cells"], found["cell_fractions"]) if "cells" in found else None
+    cells = (found["cells"], found["cell_units"]) if "cells" in found else None
     return weigh(found), cells
 
 

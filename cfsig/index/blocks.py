@@ -1,17 +1,15 @@
 """Blocks: stream the rows of a 2-D float32 or uint16 HDF5 dataset without holding it in memory.
 
 Where HDF5 stores rows as plain bytes (contiguous, or chunked by whole rows with no filter, in a
-file without a user block, read by the default driver), a block is read from the file with one
-``preadv`` into a reused buffer, at the offset HDF5 reports: one copy from the page cache, no
-HDF5 in between. With a thread per core this scanned faster than memory-mapping each block,
-though one thread alone reads mapped blocks faster (studied at commit 35f8114,
-docs/query-options.md); some columns
-of a block (`read_columns`) are copied from a memory map, which reads only those
-(docs/method.md); and the fine cells, which a partial query reads whole and scores
-where they lie, are viewed in one memory map of their file (`map_file`, `mapped_block`), its
-page table filled a block at a time: no copy at all (docs/method.md). Any other layout (compressed,
-compact, external, non-native byte
-order, chunks not yet allocated) is read through h5py into the same buffer. Reading at fixed
+file without a user block, read by the default driver), they are read at the offset HDF5
+reports, with no HDF5 in between. A scan views each block in place in one read-only memory map
+of the file (`map_file`, `load_block`), its page table filled a block at a time: no copy at
+all. Some columns of a block (`read_columns`) are copied from a memory map, which reads only
+those; rows scattered over a block (`read_rows`) are copied from the map where the block gives
+64 or more, else read run by run with ``preadv`` (docs/performance.md). Where the file cannot
+be mapped, a block is read with one ``preadv`` into a reused buffer (`read_block`). Any other
+layout (compressed, compact, external, non-native byte order, chunks not yet allocated) is read
+through h5py into the same buffer. Reading at fixed
 offsets is safe because the files of an index are never modified: a commit adds a segment file
 and renames a new manifest into place, and a merge deletes the files it replaced, which stay
 readable through the open file.
@@ -35,6 +33,9 @@ _PLAIN_TYPES = (np.dtype(np.float32), np.dtype(np.uint16))  # native: the bytes 
 # one call, not a fault per 64 KB (docs/method.md).
 _POPULATE_READ = 22
 _DENSE = 4  # `read_rows` reads a whole block when it wants a quarter of its rows or more
+# `read_rows` copies a block's rows from a memory map from this many on: filling the block's page
+# table costs about what as many reads of runs do (measured on a million rows).
+_MAPPED_ROWS = 64
 
 
 @dataclass(frozen=True)
@@ -171,6 +172,38 @@ def mapped_block(dataset: h5py.Dataset, block: Block, mapped: mmap.mmap) -> np.n
     return rows.reshape(-1, dataset.shape[1])
 
 
+def load_block(
+    dataset: h5py.Dataset, block: Block, buffer: np.ndarray, mapped: mmap.mmap | None
+) -> np.ndarray:
+    """The rows of one block: viewed in place where they are plain bytes of a mapped file,
+    else read into ``buffer``.
+
+    Parameters
+    ----------
+    dataset : h5py.Dataset
+        The dataset the block was planned on, still open.
+    block : Block
+        From `plan_blocks`.
+    buffer : (rows, bins) of the dataset's dtype, C-contiguous
+        As `read_block`; unused when the block is viewed.
+    mapped : mmap.mmap or None
+        `map_file` of the dataset, or None: read.
+
+    Returns
+    -------
+    rows : (block.stop - block.start, bins)
+        `mapped_block` or `read_block`.
+
+    Raises
+    ------
+    IndexFileError
+        The file ends before the block does.
+    """
+    if mapped is not None and block.offset is not None:
+        return mapped_block(dataset, block, mapped)
+    return read_block(dataset, block, buffer)
+
+
 def read_columns(
     dataset: h5py.Dataset, block: Block, columns: slice, buffer: np.ndarray
 ) -> np.ndarray:
@@ -219,9 +252,14 @@ def read_columns(
 
 
 def read_rows(
-    dataset: h5py.Dataset, blocks: list[Block], rows: np.ndarray, out: np.ndarray
+    dataset: h5py.Dataset,
+    blocks: list[Block],
+    rows: np.ndarray,
+    out: np.ndarray,
+    mapped: mmap.mmap | None = None,
 ) -> np.ndarray:
-    """Some rows of a dataset, read by runs of adjacent rows, or by whole blocks where dense.
+    """Some rows of a dataset: copied from a memory map of its file where they are plain
+    bytes there, else read by runs of adjacent rows, or by whole blocks where dense.
 
     Parameters
     ----------
@@ -233,6 +271,9 @@ def read_rows(
         Distinct row numbers, ascending.
     out : (m', bins) of the dataset's dtype, C-contiguous
         Space for at least m rows.
+    mapped : mmap.mmap, optional
+        `map_file` of the dataset: rows scattered over many blocks cost a copy each from it,
+        not a system call per run.
 
     Returns
     -------
@@ -253,6 +294,9 @@ def read_rows(
     for first, last in zip(bounds[:-1], bounds[1:], strict=True):
         block = blocks[which[first]]
         local = rows[first:last] - block.start
+        if mapped is not None and block.offset is not None and len(local) >= _MAPPED_ROWS:
+            got[first:last] = mapped_block(dataset, block, mapped)[local]
+            continue
         if block.offset is None or _DENSE * len(local) >= block.stop - block.start:
             whole = np.empty((block.stop - block.start, dataset.shape[1]), dataset.dtype)
             got[first:last] = read_block(dataset, block, whole)[local]

@@ -58,7 +58,7 @@ from cfsig.index.sketch import Sketch
 from cfsig.params import Layout, Params
 
 FORMAT = "cfsig-index"
-FORMAT_VERSION = 5
+FORMAT_VERSION = 6
 MANIFEST = "manifest.h5"
 LOCK = "lock"
 REBUILD = "rebuild it: cfsig index FOLDER -o NEW_INDEX"
@@ -183,9 +183,9 @@ class SegmentView:
         The layout's column groups stored on their own, which a search of those columns reads
         instead of the signatures.
     cells : (h5py.Dataset, h5py.Dataset) or None
-        The fine curvature cells of its rows, (rows, slots) uint16, and their fractions,
-        (rows, slots) float32 (`cfsig.descriptors.cells.packed_cells`); None for a layout that
-        keeps none.
+        The fine curvature cells of its rows, (rows, slots) uint16, and their shares of the
+        area, (rows, slots) uint16 in units of ``1 / UNIT``
+        (`cfsig.descriptors.cells.packed_cells`); None for a layout that keeps none.
     """
 
     signatures: h5py.Dataset
@@ -405,27 +405,27 @@ class IndexReader:
         return np.concatenate(parts) if parts else np.zeros(0, META.get(key, object))
 
     def cells(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """Every row's fine curvature cells and their fractions, read into memory.
+        """Every row's fine curvature cells and their shares of the area, read into memory.
 
         Returns
         -------
-        cells : ((N, slots) uint16, (N, slots) float32) or None
+        cells : ((N, slots) uint16, (N, slots) uint16) or None
             `cfsig.descriptors.cells.packed_cells` of each row; None when the index keeps none.
         """
         slots = self.layout.cells
         if not slots:
             return None
         stored = [(view.cells, view.dead) for view in self.segments if view.cells is not None]
-        cells, fractions = (
+        cells, units = (
             np.concatenate(
                 [np.zeros((0, slots), dtype), *(np.delete(c[i][:], d, axis=0) for c, d in stored)]
             )
             for i, dtype in enumerate(CELLS.values())
         )
-        return cells, fractions
+        return cells, units
 
     def cells_at(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """The fine curvature cells and fractions of some rows, reading only those rows.
+        """The fine curvature cells and shares of some rows, reading only those rows.
 
         Parameters
         ----------
@@ -434,13 +434,13 @@ class IndexReader:
 
         Returns
         -------
-        cells : ((k, slots) uint16, (k, slots) float32) or None
+        cells : ((k, slots) uint16, (k, slots) uint16) or None
             As `cells`, in the order of ``rows``; None when the index keeps none.
         """
         if not self.layout.cells:
             return None
         rows = np.asarray(rows, dtype=np.int64)
-        return self._gather("cells", rows), self._gather("cell_fractions", rows)
+        return self._gather("cells", rows), self._gather("cell_units", rows)
 
 
 class Signatures:
@@ -875,7 +875,7 @@ class _Stored:
 
     @classmethod
     def read(cls, f: h5py.File, row: int, slots: int) -> _Stored:
-        cells = (f["cells"][row], f["cell_fractions"][row]) if slots else None
+        cells = (f["cells"][row], f["cell_units"][row]) if slots else None
         return cls(
             f["signatures"][row], cells, bytes(f["sha256"][row]).decode(),
             int(f["n_vertices"][row]), int(f["n_faces"][row]), int(f["n_components"][row]),
@@ -1336,14 +1336,14 @@ def _read_sketch(f: h5py.File, path: Path) -> Sketch | None:
 
 
 def _read_cells(f: h5py.File, path: Path, slots: int) -> tuple[h5py.Dataset, h5py.Dataset] | None:
-    """A segment's fine curvature cells and fractions, for a layout that keeps ``slots`` of
+    """A segment's fine curvature cells and their shares, for a layout that keeps ``slots`` of
     them a row (0: none); checks that they are there, in shapes that fit its signatures."""
     if not slots:
         return None
     shape = (f["signatures"].shape[0], slots)
     if any(key not in f or f[key].shape != shape for key in CELLS):
         raise IndexFileError(f"{path}: its fine curvature cells are missing or do not fit")
-    return f["cells"], f["cell_fractions"]
+    return f["cells"], f["cell_units"]
 
 
 def _read_copies(f: h5py.File, path: Path, layout: Layout) -> tuple[ColumnCopy, ...]:
@@ -1402,7 +1402,7 @@ def _not_a_folder(path: Path) -> NoReturn:
 
 def _made_by(params: object, version: int) -> str:
     """What an index of an older format was made with, in words, from its stored parameters."""
-    if version >= 3:  # formats 3 and 4 name today's descriptors, computed otherwise
+    if version >= 3:  # formats 3 to 5 name today's descriptors, computed or stored otherwise
         return f"made by an older cfsig, in index format {version}"
     try:
         data = json.loads(str(params))

@@ -2,9 +2,10 @@
 
 A part's score against a whole is, at the best of its shares, the share of the part's cells
 that the whole's cannot hold plus the area the two do not share (docs/method.md, "Partial
-queries"). The shares of an area are summed as integers in units of ``1 / UNIT``, so that the
-NumPy reference `cell_scores` and the compiled kernel (`cfsig.search.cells_compiled`) give the same
-scores to the last bit.
+queries"). The shares of an area are summed as integers in units of ``1 / UNIT``
+(`cfsig.descriptors.cells.area_units`), as the index keeps them, so that the NumPy reference
+`cell_scores` and the compiled kernel (`cfsig.search.cells_compiled`) give the same scores to the
+last bit.
 """
 
 from __future__ import annotations
@@ -13,27 +14,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-# The kernels sum shares of an area as integers in units of 1/UNIT, 16 bits each: a row's SLOTS
-# fractions, each rounded by at most half a unit, still sum below 2^16.
-UNIT = 65_000
-
-
-def area_units(fractions: np.ndarray) -> np.ndarray:
-    """Shares of a surface's area in the kernels' integer units of ``1 / UNIT``.
-
-    Parameters
-    ----------
-    fractions : array of float
-        Shares of an area, in [0, 1].
-
-    Returns
-    -------
-    units : uint16 array, the shape of ``fractions``
-        ``fractions * UNIT`` in float32, rounded to the nearest integer (ties to even), as
-        `cfsig.search.cells_compiled` rounds them.
-    """
-    scaled = np.asarray(fractions, np.float32) * np.float32(UNIT)
-    return np.rint(np.clip(scaled, 0, UNIT)).astype(np.uint16)
+from cfsig.descriptors.cells import UNIT, area_units
 
 
 def part_table(
@@ -80,14 +61,14 @@ def cell_scores(
     part: Sequence[tuple[np.ndarray, np.ndarray]],
     shares: tuple[float, ...],
     cells: np.ndarray,
-    fractions: np.ndarray,
+    units: np.ndarray,
 ) -> np.ndarray:
     """The partial distance of a part to some wholes by their cells.
 
     For a share ``f``, with the part's histogram ``p`` and a whole's ``w`` (each of mass 1),
     ``(1 - sum(min(f p, w)) / f) + sum(|p - w|)``: the unexplained share plus the L1 distance,
     `cfsig.search.partial.partial_scores` with weight 1; the smallest over the shares. Both terms
-    are summed in integers, on the fractions in units of ``1 / UNIT`` (`area_units`;
+    are summed in integers, on the shares in units of ``1 / UNIT`` (`area_units`;
     docs/method.md, "Fine curvature cells"): ``1 - E / F`` and ``(P + W - 2 C) / UNIT``, with
     ``E`` and ``C`` the sums of ``min(f p, w)`` and ``min(p, w)``, ``F`` and ``P`` those of
     ``f p`` and ``p``, ``W`` that of ``w``; `cfsig.search.cells_compiled` computes the same
@@ -101,8 +82,8 @@ def cell_scores(
         The shares, one per histogram of ``part``.
     cells : (m, slots) int
         The wholes' `packed_cells`, below 65,536.
-    fractions : (m, slots) float
-        Their fractions.
+    units : (m, slots) uint16
+        Their shares of the area in units of ``1 / UNIT``.
 
     Returns
     -------
@@ -112,7 +93,6 @@ def cell_scores(
     """
     rows, table, masses, explained = part_table(part, shares, len(shares))
     at = rows[cells]
-    units = area_units(fractions)
     both = (at > 0) & (units > 0)
     counts = both.sum(axis=1)
     gained = np.minimum(table[at[both]], units[both][:, None, None])  # (entries, 2, shares)

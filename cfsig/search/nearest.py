@@ -9,6 +9,7 @@ its own (`cfsig.descriptors.base.Distance`) is searched by its lower bound and t
 from __future__ import annotations
 
 import contextlib
+import mmap
 import os
 import threading
 from collections.abc import Callable, Iterator
@@ -23,7 +24,15 @@ import numpy as np
 from cfsig import descriptors
 from cfsig.descriptors.base import Distance
 from cfsig.errors import IndexFileError
-from cfsig.index.blocks import Block, plan_blocks, read_block, read_columns, read_rows
+from cfsig.index.blocks import (
+    Block,
+    load_block,
+    map_file,
+    plan_blocks,
+    read_block,
+    read_columns,
+    read_rows,
+)
 from cfsig.index.sketch import adjust_bounds, query_sketches, threshold
 from cfsig.index.store import REBUILD, Entry, IndexReader, SegmentView
 from cfsig.search.l1 import Kernel, choose_kernel, fast_kernel, l1_numpy
@@ -191,7 +200,13 @@ def _scan(
     queries' distances are merged, as ``best``'s one query.
     """
     sources = {id(view): _source(view, columns) for view in views}
-    blocks = [(view, b) for view in views for b in plan_blocks(sources[id(view)][0], _BLOCK_ROWS)]
+    plans = {id(view): plan_blocks(sources[id(view)][0], _BLOCK_ROWS) for view in views}
+    blocks = [(view, b) for view in views for b in plans[id(view)]]
+    maps: dict[int, mmap.mmap | None] = {}  # whole rows, where plain, are viewed: no copy
+    for view in views:
+        dataset, wanted = sources[id(view)]
+        plain = wanted is None and any(b.offset is not None for b in plans[id(view)])
+        maps[id(view)] = map_file(dataset) if plain else None
     block_rows = max((b.stop - b.start for _, b in blocks), default=1)
     group = len(queries) if score else max(1, _OUT_CELLS // block_rows)
 
@@ -202,7 +217,7 @@ def _scan(
         space = buffer.reshape(-1)[: buffer.shape[0] * dataset.shape[1]]
         space = space.reshape(buffer.shape[0], dataset.shape[1])
         if wanted is None:
-            rows = read_block(dataset, block, space)
+            rows = load_block(dataset, block, space, maps[id(view)])
         else:
             rows = read_columns(dataset, block, wanted, space)
         dead = view.dead[(view.dead >= block.start) & (view.dead < block.stop)] - block.start
@@ -240,6 +255,10 @@ class _Pruned:
         self.views, self.kernel, self.best = views, kernel, best
         self.width = views[0].signatures.shape[1]
         self.plans = [plan_blocks(v.signatures, _BLOCK_ROWS) for v in views]
+        self.maps = [
+            map_file(v.signatures) if any(b.offset is not None for b in plan) else None
+            for v, plan in zip(views, self.plans, strict=True)
+        ]
         n = reader.physical_rows
         self.excluded = np.ones(n, bool)  # superseded rows, and those of other segments
         for v in views:
@@ -449,7 +468,8 @@ class _Pruned:
             view, mine = self.views[i], rows[seg == i]
             for first in range(0, len(mine), len(buffer)):
                 picked = mine[first : first + len(buffer)]
-                values = read_rows(view.signatures, self.plans[i], picked - view.start, buffer)
+                local = picked - view.start
+                values = read_rows(view.signatures, self.plans[i], local, buffer, self.maps[i])
                 dist = np.empty((1, len(values)), np.float32)
                 self.kernel(query[None], values, dist)
                 with lock or contextlib.nullcontext():

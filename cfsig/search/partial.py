@@ -26,7 +26,7 @@ import numpy as np
 
 from cfsig.descriptors.parts import FINE_SHARES, SHARES, Part, curvature_columns
 from cfsig.errors import PartialError
-from cfsig.index.blocks import Block, map_file, mapped_block, plan_blocks, read_block
+from cfsig.index.blocks import Block, load_block, map_file, plan_blocks
 from cfsig.index.store import IndexReader, SegmentView
 from cfsig.params import Params
 from cfsig.search.cells import cell_scores
@@ -44,14 +44,14 @@ CLOSED_WEIGHT = 1.0
 CLOSED_SCALE = 1.1
 # Rows from which the compiled kernel repays laying out the part's table for it.
 FAST_MIN_ROWS = 500
-# A part's scores of blocks of wholes: ``scorer(cells, fractions)`` as `cell_scores`.
+# A part's scores of blocks of wholes: ``scorer(cells, units)`` as `cell_scores`.
 Scorer = Callable[[np.ndarray, np.ndarray], np.ndarray]
 _FLOOR = 1e-9  # the least distance `fused_scores` divides by: a part equal to a whole scores 0
 _CELL_BLOCK_ROWS = 4096  # rows of fine cells read at a time, as a segment stores them
 _SCORE_ROWS = 512  # rows of fine cells scored at a time: bounds NumPy's scratch memory
-# A thread's space for a block of fine cells: (rows, slots) uint16 cells, float32 fractions.
+# A thread's space for a block of fine cells: (rows, slots) uint16 cells and shares.
 _CellBuffers = tuple[np.ndarray, np.ndarray]
-# A block of fine cells to score: its segment, its blocks of cells and of fractions, and the
+# A block of fine cells to score: its segment, its blocks of cells and of shares, and the
 # memory map of the segment's file where they are plain bytes.
 _CellTask = tuple[SegmentView, Block, Block, mmap.mmap | None]
 
@@ -129,15 +129,11 @@ def _nearest_by_cells(
     def work(task: _CellTask, buffers: _CellBuffers, lock: threading.Lock) -> None:
         view, block, same, mapped = task
         assert view.cells is not None and block.start == same.start  # one chunking: index.py
-        if mapped is None:
-            stored = read_block(view.cells[0], block, buffers[0])
-            fractions = read_block(view.cells[1], same, buffers[1])
-        else:
-            stored = mapped_block(view.cells[0], block, mapped)
-            fractions = mapped_block(view.cells[1], same, mapped)
+        stored = load_block(view.cells[0], block, buffers[0], mapped)
+        units = load_block(view.cells[1], same, buffers[1], mapped)
         scores = np.concatenate(
             [
-                score(stored[i : i + _SCORE_ROWS], fractions[i : i + _SCORE_ROWS])
+                score(stored[i : i + _SCORE_ROWS], units[i : i + _SCORE_ROWS])
                 for i in range(0, len(stored), _SCORE_ROWS)
             ]
         )
@@ -149,7 +145,7 @@ def _nearest_by_cells(
             found.append((scores[best], view.start + start + best))
 
     def make_buffers() -> _CellBuffers:
-        return np.empty((rows, slots), np.uint16), np.empty((rows, slots), np.float32)
+        return np.empty((rows, slots), np.uint16), np.empty((rows, slots), np.uint16)
 
     parallel(tasks, work, make_buffers)
     scores = np.concatenate([np.zeros(0), *(f[0] for f in found)])
@@ -174,16 +170,14 @@ def partial_distances(
         The wholes' signatures, made with ``params``.
     params : Params
         Their parameters.
-    cells : ((N, slots) uint16, (N, slots) float32), optional
-        The wholes' fine cells and fractions (`cfsig.descriptors.signature.Signature.cells`),
-        needed when
-        ``params`` keep them.
+    cells : ((N, slots) uint16, (N, slots) uint16), optional
+        The wholes' fine cells and their shares (`cfsig.descriptors.signature.Signature.cells`),
+        needed when ``params`` keep them.
 
     Returns
     -------
     distances : (N,) float64
-        `partial_scores` of the wholes, or by their fine cells
-        `cfsig.descriptors.cells.part_scorer`.
+        `partial_scores` of the wholes, or by their fine cells `part_scorer`.
 
     Raises
     ------
@@ -367,8 +361,8 @@ def part_scorer(
     Returns
     -------
     scorer : callable
-        ``scorer(cells, fractions)``: the wholes' (m, slots) cells and fractions to their (m,)
-        float64 scores.
+        ``scorer(cells, units)``: the wholes' (m, slots) cells and shares to their (m,) float64
+        scores.
     """
     if rows >= FAST_MIN_ROWS:
         try:
