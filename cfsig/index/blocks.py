@@ -9,10 +9,9 @@ those; rows scattered over a block (`read_rows`) are copied from the map where t
 64 or more, else read run by run with ``preadv`` (docs/performance.md). Where the file cannot
 be mapped, a block is read with one ``preadv`` into a reused buffer (`read_block`). Any other
 layout (compressed, compact, external, non-native byte order, chunks not yet allocated) is read
-through h5py into the same buffer. Reading at fixed
-offsets is safe because the files of an index are never modified: a commit adds a segment file
-and renames a new manifest into place, and a merge deletes the files it replaced, which stay
-readable through the open file.
+through h5py into the same buffer. Reading at fixed offsets is safe because the files of an
+index are never modified: a commit adds a segment file and renames a new manifest into place,
+and a merge deletes the files it replaced, which stay readable through the open file.
 """
 
 from __future__ import annotations

@@ -35,9 +35,8 @@ META = {
 }
 TEXT = ("names", "labels", "paths")
 COLUMNS = (*TEXT, "sha256", *META)  # the columns of a row besides its signature
-# The fine curvature cells of a row (`cfsig.descriptors.cells.packed_cells`), (rows, slots) each,
-# in the
-# segments of an index whose layout keeps them (`cfsig.params.Layout.cells`).
+# The fine curvature cells of a row and their shares (`cfsig.descriptors.cells.packed_cells`),
+# (rows, slots) each, in the segments of an index whose layout keeps them (`Layout.cells`).
 CELLS = {"cells": np.uint16, "cell_units": np.uint16}
 _DTYPES = {**{k: STRING for k in TEXT}, "sha256": "S64", **META}
 _CHUNK_ROWS = 4096  # rows per chunk of signatures, each with its CRC-32
