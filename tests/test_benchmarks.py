@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+import cfsig
 from cfsig.files.demo import make_demo_collection
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -79,6 +80,31 @@ def test_partial_speed(tmp_path):
     out = run("partial_speed.py", "--index-dir", tmp_path, "--rows", 2000, "--repeat", 1)
     assert "2,000 rows" in out
     assert re.search(rf"--partial`, 2,000 rows .*: median {NUMBER} s over 1 \(range", out)
+
+
+def test_partial_speed_from_a_real_index(data, tmp_path):
+    real = tmp_path / "real"
+    command = [sys.executable, "-m", "cfsig", "index", data / "shrec07", "-o", real]
+    subprocess.run([*map(str, command), "--partial-cells"], check=True, capture_output=True)
+    args = ["--index-dir", tmp_path, "--rows", 1500, "--real", real, "--repeat", 1]
+    out = run("partial_speed.py", *args)
+    assert re.search(rf"--partial`, 1,500 rows .*: median {NUMBER} s over 1 \(range", out)
+    with cfsig.IndexReader(tmp_path / "rows-1500") as made, cfsig.IndexReader(real) as wholes:
+        assert len(made) == 1500
+        held = {tuple(c) for c in wholes.cells()[0]}
+        assert {tuple(c) for c in made.cells()[0][:50]} <= held  # each row a whole's cells
+    plain = tmp_path / "plain"  # no fine cells: refused in one line
+    subprocess.run([*map(str, command[:-1]), plain], check=True, capture_output=True)
+    args = ["--index-dir", tmp_path / "other", "--rows", "10", "--real", plain]
+    refused = subprocess.run(
+        [sys.executable, "benchmarks/partial_speed.py", *map(str, args)],
+        cwd=ROOT, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert refused.returncode == 1
+    assert (
+        refused.stderr.strip()
+        == f"{plain}: not an index of the default parameters with --partial-cells"
+    )
 
 
 def test_per_mesh(data):
