@@ -122,7 +122,8 @@ def map_file(dataset: h5py.Dataset) -> mmap.mmap | None:
     Parameters
     ----------
     dataset : h5py.Dataset
-        A dataset of an open file whose rows are plain bytes (its blocks have offsets).
+        A dataset of an open file; only its blocks of plain bytes (with offsets) are read
+        through the map (`load_block`, `read_rows`), the others through a buffer.
 
     Returns
     -------

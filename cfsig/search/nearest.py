@@ -9,7 +9,6 @@ its own (`cfsig.descriptors.base.Distance`) is searched by its lower bound and t
 from __future__ import annotations
 
 import contextlib
-import mmap
 import os
 import threading
 from collections.abc import Callable, Iterator
@@ -200,13 +199,9 @@ def _scan(
     queries' distances are merged, as ``best``'s one query.
     """
     sources = {id(view): _source(view, columns) for view in views}
-    plans = {id(view): plan_blocks(sources[id(view)][0], _BLOCK_ROWS) for view in views}
-    blocks = [(view, b) for view in views for b in plans[id(view)]]
-    maps: dict[int, mmap.mmap | None] = {}  # whole rows, where plain, are viewed: no copy
-    for view in views:
-        dataset, wanted = sources[id(view)]
-        plain = wanted is None and any(b.offset is not None for b in plans[id(view)])
-        maps[id(view)] = map_file(dataset) if plain else None
+    blocks = [(view, b) for view in views for b in plan_blocks(sources[id(view)][0], _BLOCK_ROWS)]
+    # Whole rows are viewed in place where plain (`load_block`); columns are copied.
+    maps = {key: map_file(data) if cols is None else None for key, (data, cols) in sources.items()}
     block_rows = max((b.stop - b.start for _, b in blocks), default=1)
     group = len(queries) if score else max(1, _OUT_CELLS // block_rows)
 
@@ -255,10 +250,7 @@ class _Pruned:
         self.views, self.kernel, self.best = views, kernel, best
         self.width = views[0].signatures.shape[1]
         self.plans = [plan_blocks(v.signatures, _BLOCK_ROWS) for v in views]
-        self.maps = [
-            map_file(v.signatures) if any(b.offset is not None for b in plan) else None
-            for v, plan in zip(views, self.plans, strict=True)
-        ]
+        self.maps = [map_file(v.signatures) for v in views]
         n = reader.physical_rows
         self.excluded = np.ones(n, bool)  # superseded rows, and those of other segments
         for v in views:

@@ -52,7 +52,7 @@ _SCORE_ROWS = 512  # rows of fine cells scored at a time: bounds NumPy's scratch
 # A thread's space for a block of fine cells: (rows, slots) uint16 cells and shares.
 _CellBuffers = tuple[np.ndarray, np.ndarray]
 # A block of fine cells to score: its segment, its blocks of cells and of shares, and the
-# memory map of the segment's file where they are plain bytes.
+# memory map of the segment's file (None where it cannot be mapped).
 _CellTask = tuple[SegmentView, Block, Block, mmap.mmap | None]
 
 
@@ -118,11 +118,11 @@ def _nearest_by_cells(
         if view.cells is None:
             raise PartialError(f"{reader.path}: this index keeps no fine curvature cells")
         plans = [plan_blocks(data, _CELL_BLOCK_ROWS) for data in view.cells]
-        plain = all(b.offset is not None for plan in plans for b in plan)
-        mapped = map_file(view.cells[0]) if plain and plans[0] else None
+        mapped = map_file(view.cells[0])
         tasks += [(view, *pair, mapped) for pair in zip(*plans, strict=True)]
     score = part_scorer(cells, FINE_SHARES, sum(v.signatures.shape[0] for v in reader.segments))
-    rows = max((b.stop - b.start for _, b, _, m in tasks if m is None), default=0)
+    # Space for the blocks not viewed in place; np.empty commits no memory until it is written.
+    rows = max((b.stop - b.start for _, b, _, _ in tasks), default=0)
     slots = max((v.cells[0].shape[1] for v in reader.segments if v.cells), default=1)
     found: list[tuple[np.ndarray, np.ndarray]] = []
 
