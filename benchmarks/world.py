@@ -104,10 +104,12 @@ def cut(mesh: Mesh, share: float, rng: np.random.Generator) -> tuple[np.ndarray,
 
 def holes(mesh: Mesh, share: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """The mesh without geodesic discs around 5 random points that together hold ``share`` of
-    the area (grown together: the faces nearest to any of the points)."""
+    the area: grown together, a face goes once its farthest corner is within the radius of a
+    point, by distance along the edges, so that each hole's rim follows a circle."""
     areas = face_areas(mesh.vertices, mesh.faces)
-    seeds = rng.choice(len(areas), 5, replace=False, p=areas / areas.sum())
-    distance = dijkstra(face_graph(mesh), indices=seeds, min_only=True)
+    seeds = mesh.faces[rng.choice(len(areas), 5, replace=False, p=areas / areas.sum()), 0]
+    near = dijkstra(edge_graph(mesh), directed=False, indices=seeds, min_only=True)
+    distance = near[mesh.faces].max(axis=1)
     order = np.argsort(distance, kind="stable")
     removed = order[: np.searchsorted(np.cumsum(areas[order]), share * areas.sum()) + 1]
     kept = np.ones(len(areas), bool)
@@ -115,17 +117,12 @@ def holes(mesh: Mesh, share: float, rng: np.random.Generator) -> tuple[np.ndarra
     return mesh.vertices, mesh.faces[kept]
 
 
-def face_graph(mesh: Mesh) -> sp.csr_matrix:
-    """Faces sharing an edge, weighted by the distance of their centroids."""
-    faces = mesh.faces
-    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    order = np.lexsort((edges[:, 1], edges[:, 0]))
-    same = np.flatnonzero((np.diff(edges[order], axis=0) == 0).all(axis=1))
-    face = np.repeat(np.arange(len(faces)), 3)[order]
-    a, b = face[same], face[same + 1]
-    centroids = mesh.vertices[faces].mean(axis=1)
-    weight = np.linalg.norm(centroids[a] - centroids[b], axis=1) + 1e-12
-    return sp.coo_matrix((weight, (a, b)), shape=(len(faces),) * 2).tocsr()
+def edge_graph(mesh: Mesh) -> sp.csr_matrix:
+    """Vertices joined by an edge, weighted by its length."""
+    edges = np.unique(np.sort(mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+    length = np.linalg.norm(np.subtract(*mesh.vertices[edges.T]), axis=1) + 1e-12
+    n = len(mesh.vertices)
+    return sp.coo_matrix((length, (edges[:, 0], edges[:, 1])), shape=(n, n)).tocsr()
 
 
 def scan(mesh: Mesh, noise: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

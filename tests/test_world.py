@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.sparse.csgraph import connected_components
 
 from cfsig.files.demo import limbed_body
 from cfsig.files.mesh import Mesh, clean_mesh
@@ -59,6 +60,38 @@ def test_holes_remove_the_share_asked_for_on_new_triangles(world, sphere, share)
     assert _share(world, part, sphere) == pytest.approx(1 - share, abs=0.03)
     assert _shared_triangles(part, sphere) == 0
     assert np.any(np.bincount(part.faces.ravel()) < 4)  # it has a boundary: holes were cut
+
+
+@pytest.fixture(scope="module")
+def irregular_sphere() -> Mesh:
+    """A unit sphere on the hull of 3,000 random points: triangles of every size and shape."""
+    from scipy.spatial import ConvexHull
+
+    points = np.random.default_rng(0).normal(size=(3000, 3))
+    points /= np.linalg.norm(points, axis=1)[:, None]
+    faces = ConvexHull(points).simplices
+    normals = np.cross(
+        points[faces[:, 1]] - points[faces[:, 0]], points[faces[:, 2]] - points[faces[:, 0]]
+    )
+    inward = (normals * points[faces].mean(axis=1)).sum(axis=1) < 0
+    faces[inward] = faces[inward][:, ::-1]
+    return clean_mesh(points, faces)
+
+
+@pytest.mark.parametrize("share", [0.1, 0.25, 0.4])
+def test_holes_are_round_on_any_triangles(world, irregular_sphere, share):
+    """Each hole's rim follows a circle: the rims are no longer than five separate caps' of the
+    area removed (plus the zigzag of edges), and what is left stays in one piece or two."""
+    vertices, faces = world.holes(irregular_sphere, share, np.random.default_rng(1))
+    part = clean_mesh(*world._used(vertices, faces))  # splits pieces that touch at a vertex
+    edges = np.sort(part.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    unique, uses = np.unique(edges, axis=0, return_counts=True)
+    rims = part.vertices[unique[uses == 1]]
+    rim_length = np.linalg.norm(rims[:, 0] - rims[:, 1], axis=1).sum()
+    cap = np.arccos(1 - 2 * share / 5)  # the angle of a cap holding share / 5 of the sphere
+    assert rim_length < 1.3 * 5 * 2 * np.pi * np.sin(cap)
+    pieces = connected_components(world.edge_graph(part), directed=False)[0]
+    assert pieces <= 2
 
 
 def test_a_scan_sees_one_side_only(world, sphere):
