@@ -13,6 +13,7 @@ from cfsig.descriptors import layout
 from cfsig.descriptors.parts import (
     SHARES,
     curvature_columns,
+    measure_part,
     one_sidedness,
     partial_file,
     partial_vectors,
@@ -26,6 +27,7 @@ from cfsig.evaluation.measures import evaluate_queries
 from cfsig.files.mesh import clean_mesh
 from cfsig.index.store import IndexReader
 from cfsig.params import Params
+from cfsig.repair.stage import drop_small_pieces
 from cfsig.search.partial import (
     CANDIDATES,
     CLOSED_SCALE,
@@ -285,3 +287,40 @@ def test_a_part_whose_closed_copy_is_a_whole_ranks_that_whole_first(wholes):
         in_memory = expanded_distances(part, signatures, reader.params, cells)
         order = np.argsort(in_memory, kind="stable")
         assert [h.entry for h in hits] == reader.entries(order[: len(hits)])
+
+
+def _with_confetti(v, f, count):
+    """The mesh and ``count`` small triangles beside it, each its own piece."""
+    corner = v.max(axis=0) + 1.0
+    size = 0.01 * np.ptp(v, axis=0).max()
+    bits = (
+        corner
+        + size * np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+        + 3 * size * np.arange(count)[:, None, None]
+    )
+    faces = len(v) + np.arange(3 * count).reshape(-1, 3)
+    return np.concatenate([v, bits.reshape(-1, 3)]), np.concatenate([f, faces])
+
+
+def test_a_part_is_measured_without_its_confetti():
+    v, f = _cut(*_bumpy(), 0.3)
+    part = clean_mesh(v, f)
+    littered = clean_mesh(*_with_confetti(v, f, 40))
+    kept = drop_small_pieces(littered)
+    assert np.array_equal(kept.vertices, part.vertices) and np.array_equal(kept.faces, part.faces)
+    cells = Params(partial_cells=True)
+    plain, measured = measure_part(part, cells), measure_part(littered, cells)
+    assert plain.cells is not None and measured.cells is not None
+    for (c1, w1), (c2, w2) in zip(plain.cells, measured.cells, strict=True):
+        assert np.array_equal(c1, c2) and np.array_equal(w1, w2)
+    assert np.array_equal(plain.closed, measured.closed)
+
+
+def test_pieces_of_a_part_that_hold_their_share_are_kept():
+    v, f = icosphere(2)
+    two = clean_mesh(np.concatenate([v, v + 3.0]), np.concatenate([f, f + len(v)]))
+    assert drop_small_pieces(two) is two  # each holds half the area
+    triangle = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    grains = triangle + 2.0 * np.arange(200)[:, None, None]  # 200 equal triangles apart
+    dust = clean_mesh(grains.reshape(-1, 3), np.arange(600).reshape(-1, 3))
+    assert drop_small_pieces(dust) is dust  # no piece holds 1%: nothing to prefer

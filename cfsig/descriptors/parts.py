@@ -11,7 +11,10 @@ then measured at the 13 `FINE_SHARES` as cells instead.
 
 A part that holds most of its whole is better told by its whole-shape signature once its holes
 are closed: so a part is also measured as a whole, through the repair stage like any file
-(`closed_vector`). `cfsig.search.partial` ranks the wholes by what is measured here.
+(`closed_vector`). Both are measured on the part's pieces of at least 1% of its area
+(`cfsig.repair.stage.drop_small_pieces`): a scan's stray islands and the slivers a ragged hole
+leaves hold no curvature at the part's scales but their rims'. `cfsig.search.partial` ranks the
+wholes by what is measured here.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from cfsig.operators.conformal import Operators, operators
 from cfsig.operators.curvature import smoothed_curvature
 from cfsig.params import Params
 from cfsig.repair.simplify import simplified_mesh
+from cfsig.repair.stage import drop_small_pieces
 
 SHARES = tuple(2.0 ** (-j / 2) for j in range(7))  # a part's area over its whole's: 1 to 1/8
 # The shares at which a part's fine cells are measured (`Part.cells`): a fine histogram moves by
@@ -81,7 +85,8 @@ def measure_part(mesh: Mesh, params: Params) -> Part:
     -------
     part : Part
         Its fine cells at `FINE_SHARES` when ``params`` keep fine cells, else its
-        `partial_vectors`; and its `closed_vector`.
+        `partial_vectors`; and its `closed_vector`: all of its pieces of at least 1% of its
+        area (`cfsig.repair.stage.drop_small_pieces`).
 
     Raises
     ------
@@ -91,6 +96,7 @@ def measure_part(mesh: Mesh, params: Params) -> Part:
         A curvature diffusion failed.
     """
     curvature_columns(params)
+    mesh = drop_small_pieces(mesh)
     closed, one_sided = closed_vector(mesh, params), one_sidedness(mesh)
     if not params.partial_cells:
         return Part(partial_vectors(mesh, params), None, closed, one_sided)
@@ -269,7 +275,8 @@ def _share_values(ops: Operators, share: float) -> tuple[np.ndarray, np.ndarray]
 def partial_file(path: str | os.PathLike, params: Params) -> Part:
     """Read a part from a file and measure it (`measure_part`).
 
-    The part goes through no repair stage: its cuts and holes are what it is.
+    The part goes through no repair stage: its cuts and holes are what it is, and only its
+    smallest pieces are dropped (`measure_part`).
 
     Parameters
     ----------

@@ -584,6 +584,36 @@ def drop_fragments(
     return vertices, faces[~drop[face_part]], int(drop.sum())
 
 
+def drop_small_pieces(mesh: Mesh, fraction: float = FRAGMENT_AREA) -> Mesh:
+    """A part without its pieces of less than a fraction of its area.
+
+    A piece is a connected set of faces, pieces that touch at a single vertex apart
+    (`cfsig.files.mesh.clean_mesh` splits them). A partial query measures what is left
+    (`cfsig.descriptors.parts.measure_part`): a piece far smaller than the disc of the largest
+    curvature scale has no curvature there but its rim's (docs/method.md, "Partial queries").
+
+    Parameters
+    ----------
+    mesh : Mesh
+        A checked mesh.
+    fraction : float
+        Pieces of less than this share of the total area are dropped (`FRAGMENT_AREA`, as the
+        repair stage drops open fragments).
+
+    Returns
+    -------
+    mesh : Mesh
+        Checked; the mesh itself when it has no such piece, or when every piece is one.
+    """
+    edges, n_parts, labels = _face_graph(mesh.faces, len(mesh.vertices), mesh.edges)
+    face_part = labels[mesh.faces[:, 0]]
+    area = _part_areas(mesh.vertices, mesh.faces, face_part, n_parts)
+    keep = area >= fraction * area.sum()
+    if keep.all() or not keep.any():
+        return mesh
+    return clean_mesh(mesh.vertices, mesh.faces[keep[face_part]], weld=False)
+
+
 def fill_holes(
     vertices: np.ndarray, faces: np.ndarray, edges: Edges | None = None
 ) -> tuple[np.ndarray, np.ndarray, int]:
