@@ -587,8 +587,8 @@ def drop_fragments(
 def drop_small_pieces(mesh: Mesh, fraction: float = FRAGMENT_AREA) -> Mesh:
     """A part without its pieces of less than a fraction of its area.
 
-    A piece is a connected set of faces, pieces that touch at a single vertex apart
-    (`cfsig.files.mesh.clean_mesh` splits them). A partial query measures what is left
+    A piece is a set of faces joined through their vertices (`cfsig.files.mesh.clean_mesh` has
+    split the vertices at which pieces touch). A partial query measures what is left
     (`cfsig.descriptors.parts.measure_part`): a piece far smaller than the disc of the largest
     curvature scale has no curvature there but its rim's (docs/method.md, "Partial queries").
 
@@ -605,7 +605,7 @@ def drop_small_pieces(mesh: Mesh, fraction: float = FRAGMENT_AREA) -> Mesh:
     mesh : Mesh
         Checked; the mesh itself when it has no such piece, or when every piece is one.
     """
-    edges, n_parts, labels = _face_graph(mesh.faces, len(mesh.vertices), mesh.edges)
+    _, n_parts, labels = _face_graph(mesh.faces, len(mesh.vertices), mesh.edges)
     face_part = labels[mesh.faces[:, 0]]
     area = _part_areas(mesh.vertices, mesh.faces, face_part, n_parts)
     keep = area >= fraction * area.sum()
