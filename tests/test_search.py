@@ -150,7 +150,7 @@ def test_every_layout_gives_the_same_result(tmp_path, monkeypatch, layout):
     _build(path, hists, 7, monkeypatch)
     if LAYOUTS[layout] is not None:
         _relayout(path, **LAYOUTS[layout])
-    monkeypatch.setattr(cfsig.search.nearest, "_BLOCK_ROWS", 10)
+    monkeypatch.setattr(cfsig.search.nearest, "BLOCK_ROWS", 10)
     with IndexReader(path) as r:
         data = r.segments[0].signatures
         blocks = plan_blocks(data, 10)
@@ -159,11 +159,13 @@ def test_every_layout_gives_the_same_result(tmp_path, monkeypatch, layout):
         columns = [read_columns(data, b, slice(30, 90), buffer) for b in blocks]
         rows, _ = nearest(r, hists[:2], 6)
         some, _ = nearest(r, hists[:2, 30:90], 6, slice(30, 90))
+        scattered = r.signatures[np.array([44, 5, 30, 1, 5])]
     direct = [b.offset is not None for b in blocks]  # read from the file, not through HDF5
     assert all(direct) if layout in ("chunked", "contiguous") else not any(direct)
     assert all(b.stop - b.start <= 16 for b in blocks)
     assert np.array_equal(np.concatenate(parts), hists)
     assert np.array_equal(np.concatenate(columns), hists[:, 30:90])
+    assert np.array_equal(scattered, hists[[44, 5, 30, 1, 5]].astype(np.float32))
     assert np.array_equal(rows, _brute_nearest(hists[:2], hists, 6)[0])
     assert np.array_equal(some, _brute_nearest(hists[:2, 30:90], hists[:, 30:90], 6)[0])
 

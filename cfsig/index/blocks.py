@@ -27,6 +27,7 @@ import numpy as np
 
 from cfsig.errors import IndexFileError
 
+BLOCK_ROWS = 16384  # rows per block of a dataset that is not chunked
 _PLAIN_TYPES = (np.dtype(np.float32), np.dtype(np.uint16))  # native: the bytes are the values
 # MADV_POPULATE_READ (Linux 5.14, not in Python's mmap module): a block's page table filled in
 # one call, not a fault per 64 KB (docs/method.md).

@@ -40,6 +40,7 @@ import numpy as np
 
 from cfsig import __version__
 from cfsig.errors import IndexFileError, UnknownNameError
+from cfsig.index.blocks import BLOCK_ROWS, map_file, plan_blocks, read_rows
 from cfsig.index.segments import (
     CELLS,
     COLUMNS,
@@ -325,10 +326,9 @@ class IndexReader:
             data = self.segments[i].signatures.file[key]
             want = local[seg == i]
             order = np.unique(want)
-            run = order[-1] - order[0] + 1 == len(order)  # one slice reads faster than a list
-            picked = slice(int(order[0]), int(order[-1]) + 1) if run else order
-            read = data.asstr()[picked] if data.dtype.kind == "O" else data[picked]
-            parts.append((np.flatnonzero(seg == i), read[np.searchsorted(order, want)]))
+            parts.append(
+                (np.flatnonzero(seg == i), _read(data, order)[np.searchsorted(order, want)])
+            )
         width = parts[0][1].shape[1:] if parts else ()
         out = np.empty((len(rows), *width), object if not parts else parts[0][1].dtype)
         for where, values in parts:
@@ -441,6 +441,20 @@ class IndexReader:
             return None
         rows = np.asarray(rows, dtype=np.int64)
         return self._gather("cells", rows), self._gather("cell_units", rows)
+
+
+def _read(data: h5py.Dataset, rows: np.ndarray) -> np.ndarray:
+    """Some rows of a column of a segment, distinct and ascending.
+
+    A 2-D column is read by `cfsig.index.blocks.read_rows`, from a memory map of its file:
+    HDF5 would read a whole chunk (4,096 rows) for each row that lies in another one.
+    """
+    if data.ndim == 2 and data.shape[0]:
+        out = np.empty((len(rows), data.shape[1]), data.dtype)
+        return read_rows(data, plan_blocks(data, BLOCK_ROWS), rows, out, map_file(data))
+    run = rows[-1] - rows[0] + 1 == len(rows)  # one slice reads faster than a list
+    picked = slice(int(rows[0]), int(rows[-1]) + 1) if run else rows
+    return data.asstr()[picked] if data.dtype.kind == "O" else data[picked]
 
 
 class Signatures:

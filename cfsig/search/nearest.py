@@ -24,6 +24,7 @@ from cfsig import descriptors
 from cfsig.descriptors.base import Distance
 from cfsig.errors import IndexFileError
 from cfsig.index.blocks import (
+    BLOCK_ROWS,
     Block,
     load_block,
     map_file,
@@ -36,7 +37,6 @@ from cfsig.index.sketch import adjust_bounds, query_sketches, threshold
 from cfsig.index.store import REBUILD, Entry, IndexReader, SegmentView
 from cfsig.search.l1 import Kernel, choose_kernel, fast_kernel, l1_numpy
 
-_BLOCK_ROWS = 16384  # rows per block of a dataset that is not chunked
 _OUT_CELLS = 1 << 20  # distances computed per kernel call (4 MB): bounds memory for many queries
 PRUNE_MIN_ROWS = 50_000  # rows with sketches from which a search prunes: docs/performance.md
 _BOUND_CELLS = 1 << 27  # bounds held at once (512 MB): the queries of one scan of the sketches
@@ -199,7 +199,7 @@ def _scan(
     queries' distances are merged, as ``best``'s one query.
     """
     sources = {id(view): _source(view, columns) for view in views}
-    blocks = [(view, b) for view in views for b in plan_blocks(sources[id(view)][0], _BLOCK_ROWS)]
+    blocks = [(view, b) for view in views for b in plan_blocks(sources[id(view)][0], BLOCK_ROWS)]
     # Whole rows are viewed in place where plain (`load_block`); columns are copied.
     maps = {key: map_file(data) if cols is None else None for key, (data, cols) in sources.items()}
     block_rows = max((b.stop - b.start for _, b in blocks), default=1)
@@ -249,7 +249,7 @@ class _Pruned:
     ) -> None:
         self.views, self.kernel, self.best = views, kernel, best
         self.width = views[0].signatures.shape[1]
-        self.plans = [plan_blocks(v.signatures, _BLOCK_ROWS) for v in views]
+        self.plans = [plan_blocks(v.signatures, BLOCK_ROWS) for v in views]
         self.maps = [map_file(v.signatures) for v in views]
         n = reader.physical_rows
         self.excluded = np.ones(n, bool)  # superseded rows, and those of other segments
@@ -366,7 +366,7 @@ class _Pruned:
         bounds = np.empty(shape, np.float32)
         sketches = {id(v): query_sketches(queries, v.sketch) for v in self.views if v.sketch}
         blocks = [
-            (v, b) for v in self.views if v.sketch for b in plan_blocks(v.sketch.rows, _BLOCK_ROWS)
+            (v, b) for v in self.views if v.sketch for b in plan_blocks(v.sketch.rows, BLOCK_ROWS)
         ]
         block_rows = max((b.stop - b.start for _, b in blocks), default=1)
 
@@ -451,10 +451,10 @@ class _Pruned:
     ) -> None:
         """Compute the float32 distances of query j to some rows (ascending) and merge them.
 
-        At most ``len(buffer)`` rows (`_BLOCK_ROWS` without one) are read at a time.
+        At most ``len(buffer)`` rows (`BLOCK_ROWS` without one) are read at a time.
         """
         if buffer is None:
-            buffer = np.empty((min(len(rows), _BLOCK_ROWS), self.width), np.float32)
+            buffer = np.empty((min(len(rows), BLOCK_ROWS), self.width), np.float32)
         seg = np.searchsorted(self.starts, rows, side="right") - 1
         for i in np.unique(seg):
             view, mine = self.views[i], rows[seg == i]
@@ -503,11 +503,9 @@ def nearest_by(
         return best.result(reader)
     kernel = fast_kernel() or l1_numpy  # many image pairs per row: faiss repays its import
     bounds = np.full((len(queries), reader.physical_rows), np.inf)
-    plans = [plan_blocks(view.signatures, _BLOCK_ROWS) for view in reader.segments]
+    plans = [plan_blocks(view.signatures, BLOCK_ROWS) for view in reader.segments]
     for view, plan in zip(reader.segments, plans, strict=True):
-        buffer = np.empty(
-            (min(_BLOCK_ROWS, view.signatures.shape[0]), queries.shape[1]), np.float32
-        )
+        buffer = np.empty((min(BLOCK_ROWS, view.signatures.shape[0]), queries.shape[1]), np.float32)
         for block in plan:
             rows = read_block(view.signatures, block, buffer)
             at = slice(view.start + block.start, view.start + block.stop)
