@@ -59,13 +59,26 @@ def wholes(real: Path | None, folder: Path) -> tuple[list[Path], list[cfsig.Sign
     return paths, made
 
 
+def jittered(
+    cells: tuple[np.ndarray, np.ndarray], rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """A whole's fine cells with each share lowered by 0 or 1 unit (of 65,000), kept at least
+    1 (never raised: a row's units must still sum below 2^16): the rows of one whole score
+    apart, as rows of distinct wholes do."""
+    held, units = cells
+    lowered = units.astype(np.int64) - rng.integers(0, 2, units.shape)
+    return held, np.maximum(lowered, units > 0).astype(np.uint16)
+
+
 def build(index: Path, rows: int, signatures: list[cfsig.Signature]) -> float:
     """Write ``rows`` rows with fine cells; the seconds taken. Each row holds the cells of one
-    whole and, as its vector, a random mix of two wholes' vectors plus noise of `NOISE` times
-    each coordinate's spread over them: rows that look like real ones, not copies, which
-    would tie at distance 0 and defeat the whole-shape search's pruning."""
+    whole, their shares `jittered`, and, as its vector, a random mix of two wholes' vectors plus
+    noise of `NOISE` times each coordinate's spread over them: rows that look like real ones,
+    not copies, which would tie at distance 0, defeat the whole-shape search's pruning and put
+    a query's nearest rows all among the first copies."""
     start = time.perf_counter()
     vectors = np.array([s.vector for s in signatures])
+    cells = [s.cells for s in signatures]
     spread = vectors.std(axis=0)
     rng = np.random.default_rng(0)
     with cfsig.IndexWriter(index, PARAMS, cfsig.layout(PARAMS)) as writer:
@@ -78,7 +91,7 @@ def build(index: Path, rows: int, signatures: list[cfsig.Signature]) -> float:
             for j in range(count):
                 label = f"class{a[j]}"
                 name = f"{label}/{first + j}.off"
-                row = replace(signatures[a[j]], vector=mixed[j])
+                row = replace(signatures[a[j]], vector=mixed[j], cells=jittered(cells[a[j]], rng))
                 writer.add(cfsig.Entry(name, label, f"/rows/{name}"), row)
             writer.commit()
     return time.perf_counter() - start
