@@ -7,8 +7,8 @@ Builds ``DIR/rows-N``, an index of N rows with fine curvature cells
 index ``--real`` (``cfsig index DATA/shrec07 -o INDEX --partial-cells``), whose cells are as
 many as real meshes have (about 700 a row on SHREC 2007); without it, the demo collection
 (`cfsig.files.demo.make_demo_collection`, one mesh a class: 6, about 240 cells a row), computed
-once. Each row holds the fine cells of one whole and a vector mixed from two of them plus
-noise (`build`), a commit every 100,000 rows.
+once. Each row holds the fine cells of one whole, their shares jittered by a unit, and a vector
+mixed from two of them plus noise (`build`), a commit every 100,000 rows.
 
 Then times the whole command ``python -m cfsig query DIR/rows-N PART.off --partial`` in a fresh
 interpreter (its start, imports, the part's measurement and the search of every row included),

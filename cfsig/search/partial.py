@@ -259,7 +259,7 @@ def expanded_distances(
         The wholes' signatures, made with ``params``.
     params : Params
         Their parameters.
-    cells : ((N, slots) uint16, (N, slots) float32), optional
+    cells : ((N, slots) uint16, (N, slots) uint16), optional
         As `partial_distances`.
 
     Returns
