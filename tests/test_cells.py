@@ -99,6 +99,20 @@ def _histogram(rng, count, size=3000):
     return c, w / w.sum()
 
 
+def test_cell_scores_of_many_rows_are_each_rows():
+    rng = np.random.default_rng(4)
+    shares = (1.0, 0.5)
+    part = [_histogram(rng, 40, 200) for _ in shares]
+    cells = np.zeros((1100, 60), np.uint16)  # more rows than are scored at a time
+    fractions = np.zeros((1100, 60))
+    for row in range(len(cells)):
+        c, w = _histogram(rng, int(rng.integers(1, 60)), 200)
+        cells[row, : len(c)], fractions[row, : len(c)] = c, w
+    units = area_units(fractions)
+    each = [cell_scores(part, shares, cells[i : i + 1], units[i : i + 1])[0] for i in range(1100)]
+    assert np.array_equal(cell_scores(part, shares, cells, units), each)
+
+
 def test_cell_scores_are_the_partial_distance():
     rng = np.random.default_rng(3)
     size, shares = 60, (1.0, 0.5, 0.25)
@@ -146,11 +160,21 @@ def test_compiled_scores_are_numpys(slots, shares):
     got = fast(cells, units)
     assert got.dtype == np.float64 and got.shape == (300,)
     assert np.array_equal(got, expected)  # the same sums in integers, the same float64 steps
+    compiled = sys.modules["cfsig.search.cells_compiled"]
+    for avx2 in {False, compiled.AVX2}:  # the portable loop, and the AVX2 one where it runs
+        assert np.array_equal(compiled.part_scorer(part, shares, avx2=avx2)(cells, units), expected)
     assert np.ptp(got) > 1  # spread: the part's own cells and unrelated ones
     assert np.array_equal(fast(cells[:0], units[:0]), np.zeros(0))
     empty = fast(cells[:2, :0], units[:2, :0])  # no slots: all of the part is unexplained
     assert np.array_equal(empty, cell_scores(part, shares, cells[:2, :0], units[:2, :0]))
     assert empty == pytest.approx([2.0, 2.0], abs=1e-2)
+
+
+def test_the_avx2_loop_is_refused_without_avx2(monkeypatch):
+    compiled = pytest.importorskip("cfsig.search.cells_compiled", reason="built when installed")
+    monkeypatch.setattr(compiled, "AVX2", False)
+    with pytest.raises(ValueError, match="no AVX2"):
+        compiled.part_scorer([(np.array([1]), np.array([1.0]))], (1.0,), avx2=True)
 
 
 @pytest.mark.parametrize("case", ["small search", "not built", "too many shares"])

@@ -16,6 +16,8 @@ import numpy as np
 
 from cfsig.descriptors.cells import UNIT, area_units
 
+_ROWS = 512  # rows `cell_scores` scores at a time: bounds its scratch memory
+
 
 def part_table(
     part: Sequence[tuple[np.ndarray, np.ndarray]], shares: tuple[float, ...], lanes: int
@@ -91,12 +93,28 @@ def cell_scores(
         Dimensionless, in [0, 3] up to the rounding to units: 0 for a whole that is its own
         part at share 1.
     """
-    rows, table, masses, explained = part_table(part, shares, len(shares))
+    laid_out = part_table(part, shares, len(shares))
+    scores = [
+        _scores(*laid_out, cells[i : i + _ROWS], units[i : i + _ROWS])
+        for i in range(0, len(cells), _ROWS)
+    ]
+    return np.concatenate([np.zeros(0), *scores])
+
+
+def _scores(
+    rows: np.ndarray,
+    table: np.ndarray,
+    masses: np.ndarray,
+    explained: np.ndarray,
+    cells: np.ndarray,
+    units: np.ndarray,
+) -> np.ndarray:
+    """`cell_scores` of some rows, from the part's `part_table`."""
     at = rows[cells]
     both = (at > 0) & (units > 0)
     counts = both.sum(axis=1)
     gained = np.minimum(table[at[both]], units[both][:, None, None])  # (entries, 2, shares)
-    totals = np.zeros((len(cells), 2, len(shares)), np.int64)
+    totals = np.zeros((len(cells), 2, len(masses)), np.int64)
     filled = np.flatnonzero(counts)
     if len(filled):
         starts = np.concatenate([[0], np.cumsum(counts[filled])[:-1]])

@@ -48,7 +48,6 @@ FAST_MIN_ROWS = 500
 Scorer = Callable[[np.ndarray, np.ndarray], np.ndarray]
 _FLOOR = 1e-9  # the least distance `fused_scores` divides by: a part equal to a whole scores 0
 _CELL_BLOCK_ROWS = 4096  # rows of fine cells read at a time, as a segment stores them
-_SCORE_ROWS = 512  # rows of fine cells scored at a time: bounds NumPy's scratch memory
 # A thread's space for a block of fine cells: (rows, slots) uint16 cells and shares.
 _CellBuffers = tuple[np.ndarray, np.ndarray]
 # A block of fine cells to score: its segment, its blocks of cells and of shares, and the
@@ -131,12 +130,7 @@ def _nearest_by_cells(
         assert view.cells is not None and block.start == same.start  # one chunking: index.py
         stored = load_block(view.cells[0], block, buffers[0], mapped)
         units = load_block(view.cells[1], same, buffers[1], mapped)
-        scores = np.concatenate(
-            [
-                score(stored[i : i + _SCORE_ROWS], units[i : i + _SCORE_ROWS])
-                for i in range(0, len(stored), _SCORE_ROWS)
-            ]
-        )
+        scores = score(stored, units)
         start, stop = block.start, block.stop
         scores[view.dead[(view.dead >= start) & (view.dead < stop)] - start] = np.inf
         best = np.argsort(scores, kind="stable")[:k]
