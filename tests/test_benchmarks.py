@@ -107,6 +107,17 @@ def test_partial_speed_from_a_real_index(data, tmp_path):
     )
 
 
+def test_cells_kernel(data, tmp_path):
+    pytest.importorskip("cfsig.search.cells_compiled", reason="built when cfsig is installed")
+    index = tmp_path / "i"
+    command = [sys.executable, "-m", "cfsig", "index", data / "shrec07", "-o", index]
+    subprocess.run([*map(str, command), "--partial-cells"], check=True, capture_output=True)
+    part = next((data / "shrec07" / "torus").glob("*.off"))
+    out = run("cells_kernel.py", "--index", index, "--part", part, "--rows", 4, "--repeat", 1)
+    assert out.startswith("4 rows, ")
+    assert re.search(rf"portable loop, 2 thread\(s\): {NUMBER} s per 1M rows", out)
+
+
 def test_per_mesh(data):
     args = ["--data", data / "shrec07", "--every", 2, "--descriptors", "cf", "--repeat", 1]
     out = run("per_mesh.py", *args)
