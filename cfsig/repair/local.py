@@ -220,7 +220,7 @@ def split_t_junctions(
     half = edges.order[edges.starts[:-1][counts == 1]]
     if len(half) < 2:
         return faces, 0
-    from scipy.spatial import cKDTree  # here: a tenth of a second to import, for a rare repair
+    from scipy.spatial import cKDTree  # here: a tenth of a second, for open meshes only
 
     face, corner = half // 3, half % 3
     a, b = faces[face, corner], faces[face, (corner + 1) % 3]
