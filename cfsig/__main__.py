@@ -1,5 +1,5 @@
 """Run the command line with ``python -m cfsig``."""
 
-from cfsig.cli import main
+from cfsig.cli import run
 
-main()
+run()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
 from collections import Counter
 from collections.abc import Callable
@@ -137,6 +138,30 @@ def main() -> None:
     Exit status: 0 success; 1 an error (bad input, unusable index, --strict failure);
     2 bad usage; 3 finished, but some mesh files were skipped (listed at the end).
     """
+
+
+def run() -> NoReturn:
+    """The ``cfsig`` command: `main`, then an exit that skips Python's finalization.
+
+    Every command has closed its files and joined its workers by the time `main` returns;
+    freeing SciPy, libigl, faiss and the other modules one by one would add about 80 ms to
+    each command.
+    """
+    code: str | int | None = 0
+    try:
+        main()
+    except SystemExit as done:
+        code = done.code
+    if isinstance(code, str):  # as the interpreter does with a message
+        print(code, file=sys.stderr)
+        code = EXIT_ERROR
+    code = code or 0
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except BrokenPipeError:  # the reader of the output went away
+        code = code or EXIT_ERROR
+    os._exit(code)
 
 
 @main.command()

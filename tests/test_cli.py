@@ -1,4 +1,6 @@
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -36,6 +38,23 @@ def test_version_and_help():
     for command in ["compute", "index", "query", "evaluate", "demo"]:
         result = _run(command, "--help")
         assert result.exit_code == 0 and "Example" in result.output
+
+
+def test_the_command_exits_with_its_status_and_all_its_output(tmp_path):
+    def command(*args):
+        done = subprocess.run(
+            [sys.executable, "-m", "cfsig", *map(str, args)],
+            capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+        return done.returncode, done.stdout, done.stderr
+
+    code, out, _ = command("--help")  # to its last line: every command listed
+    listed = [line.split()[0] for line in out.split("Commands:\n")[1].splitlines()]
+    assert code == 0 and listed == sorted(main.commands)
+    code, _, err = command("query", tmp_path / "none", tmp_path / "x.off")
+    assert code == 1 and err == f"Error: {tmp_path / 'none'}: no such index\n"
+    code, _, err = command("query")
+    assert code == 2 and "Missing argument" in err
 
 
 def test_compute_text_json_and_save(collection, tmp_path):
