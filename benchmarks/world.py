@@ -57,6 +57,7 @@ from cfsig.evaluation.collections import Collection
 from cfsig.evaluation.measures import evaluate_queries
 from cfsig.figures.raster import rasterize, screen_coordinates
 from cfsig.files.demo import write_off
+from cfsig.files.elements import mesh_edges
 from cfsig.files.mesh import Mesh, clean_mesh
 from cfsig.repair.simplify import decimate
 from cfsig.search.nearest import distances
@@ -119,9 +120,9 @@ def holes(mesh: Mesh, share: float, rng: np.random.Generator) -> tuple[np.ndarra
 
 def edge_graph(mesh: Mesh) -> sp.csr_matrix:
     """Vertices joined by an edge, weighted by its length."""
-    edges = np.unique(np.sort(mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
-    length = np.linalg.norm(np.subtract(*mesh.vertices[edges.T]), axis=1) + 1e-12
     n = len(mesh.vertices)
+    edges = (mesh.edges or mesh_edges(mesh.faces, n)).ends
+    length = np.linalg.norm(np.subtract(*mesh.vertices[edges.T]), axis=1) + 1e-12
     return sp.coo_matrix((length, (edges[:, 0], edges[:, 1])), shape=(n, n)).tocsr()
 
 

@@ -144,8 +144,8 @@ def run() -> NoReturn:
     """The ``cfsig`` command: `main`, then an exit that skips Python's finalization.
 
     Every command has closed its files and joined its workers by the time `main` returns;
-    freeing SciPy, libigl, faiss and the other modules one by one would add about 80 ms to
-    each command.
+    freeing SciPy, libigl, faiss and the other modules one by one would only make each command
+    slower (docs/performance.md, "Partial queries").
     """
     code: str | int | None = 0
     try:

@@ -28,6 +28,12 @@ cdef extern from *:
     #include <stdint.h>
 
     #define CELLS_WIDTH 32  /* 2 * MAX_SHARES lanes: f p at each share, then p */
+    /* The AVX2 loop is built for x86-64, by compilers that take a function's target. */
+    #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+    #define CELLS_AVX2 1
+    #else
+    #define CELLS_AVX2 0
+    #endif
 
     /* The least over the shares of (1 - E / F) + (P + W - 2 C) / UNIT, from the integer sums. */
     static inline double cells_best(const uint16_t *gained, int64_t whole, const int64_t *masses,
@@ -66,7 +72,7 @@ cdef extern from *:
         }
     }
 
-    #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+    #if CELLS_AVX2
     #include <immintrin.h>
 
     static int cells_have_avx2(void)
@@ -101,18 +107,29 @@ cdef extern from *:
     }
     #else
     static int cells_have_avx2(void) { return 0; }
-    #define cells_score_avx2 cells_score_portable  /* not called: `part_scorer` refuses it */
     #endif
+
+    /* The AVX2 loop where asked (where `cells_have_avx2`), else the portable one. */
+    static void cells_score(
+        int avx2, const uint16_t *rows, const uint16_t *table, const int64_t *masses,
+        const double *explained, int n_shares, const uint16_t *cells, const uint16_t *units,
+        int64_t m, int64_t slots, double per_unit, double *out)
+    {
+    #if CELLS_AVX2
+        if (avx2) {
+            cells_score_avx2(rows, table, masses, explained, n_shares, cells, units, m, slots,
+                             per_unit, out);
+            return;
+        }
+    #endif
+        cells_score_portable(rows, table, masses, explained, n_shares, cells, units, m, slots,
+                             per_unit, out);
+    }
     """
     int CELLS_WIDTH
     int cells_have_avx2()
-    void cells_score_portable(
-        const uint16_t *rows, const uint16_t *table, const int64_t *masses,
-        const double *explained, int n_shares, const uint16_t *cells, const uint16_t *units,
-        int64_t m, int64_t slots, double per_unit, double *out,
-    ) nogil
-    void cells_score_avx2(
-        const uint16_t *rows, const uint16_t *table, const int64_t *masses,
+    void cells_score(
+        int avx2, const uint16_t *rows, const uint16_t *table, const int64_t *masses,
         const double *explained, int n_shares, const uint16_t *cells, const uint16_t *units,
         int64_t m, int64_t slots, double per_unit, double *out,
     ) nogil
@@ -194,13 +211,7 @@ cdef void _scores(
     cdef const uint16_t *cell_data = &cells[0, 0] if slots else NULL
     cdef const uint16_t *unit_data = &units[0, 0] if slots else NULL
     with nogil:
-        if avx2:
-            cells_score_avx2(
-                &rows[0], &table[0, 0], &masses[0], &explained[0], <int>masses.shape[0],
-                cell_data, unit_data, m, slots, per_unit, &out[0],
-            )
-        else:
-            cells_score_portable(
-                &rows[0], &table[0, 0], &masses[0], &explained[0], <int>masses.shape[0],
-                cell_data, unit_data, m, slots, per_unit, &out[0],
-            )
+        cells_score(
+            avx2, &rows[0], &table[0, 0], &masses[0], &explained[0], <int>masses.shape[0],
+            cell_data, unit_data, m, slots, per_unit, &out[0],
+        )
